@@ -1,0 +1,23 @@
+# IFENN phase-field fracture workflow. `snakemake all` rebuilds every figure-level result.
+# Data flows one way: config -> mesh -> FEM runs -> figures (PICNN and IFENN stages follow).
+# Run from anywhere: snakemake -s REPO/Snakefile --directory DIR --configfile FILE TARGET
+import os
+
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: os.path.join(workflow.basedir, "config", "config.yaml")
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/mesh.smk"
+include: "workflow/rules/fem.smk"
+
+
+rule all:
+    input:
+        expand("results/mesh/{scene}.png", scene=config["scenes"]),
+        expand("results/fem/{run}/history.csv", run=config["fem_runs"]),
+        expand("results/figures/fem/{run}_force_displacement.png", run=config["fem_runs"]),

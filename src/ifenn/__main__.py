@@ -1,0 +1,34 @@
+"""Command line: ``python -m ifenn fem --spec SPEC.json --mesh MESH.xdmf --out DIR``
+(run it under ``mpirun -n N`` for N ranks), ``python -m ifenn mesh --config ... --scene S``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ifenn", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    fem = sub.add_parser("fem", help="run one FEM phase-field analysis")
+    fem.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.fem_run_spec)")
+    fem.add_argument("--mesh", required=True, help="mesh XDMF written by the mesh rule")
+    fem.add_argument("--out", required=True, help="output directory")
+    fem.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    for noisy in ("ffcx", "UFL", "root", "compilers"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+    if args.command == "fem":
+        from .solver import run_fem
+
+        with open(args.spec) as stream:
+            spec = json.load(stream)
+        run_fem(spec, args.mesh, args.out, progress=not args.no_progress)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

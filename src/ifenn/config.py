@@ -1,0 +1,185 @@
+"""Configuration: loading, schema validation, semantic checks and per-run specs.
+
+The configuration is data (config/config.yaml): scenes, load schedules and runs. Every
+check happens here, before any computation, and every error names the key, the value
+and what is allowed.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+REPO = Path(__file__).resolve().parents[2]
+SCHEMA_PATH = REPO / "config" / "schema.yaml"
+EDGES = ("left", "right", "bottom", "top")
+
+
+class ConfigError(ValueError):
+    """A configuration value is missing, of the wrong type or out of range."""
+
+
+def deep_merge(base: dict, override: dict) -> dict:
+    """Recursively merge ``override`` into a copy of ``base`` (lists are replaced whole),
+    the way Snakemake merges ``--configfile`` files."""
+    merged = copy.deepcopy(base)
+    for key, value in override.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = deep_merge(merged[key], value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def load_config(*paths: str | Path) -> dict:
+    """Read and merge YAML files in order, then validate; returns the checked config."""
+    config: dict = {}
+    for path in paths:
+        with open(path) as stream:
+            config = deep_merge(config, yaml.safe_load(stream) or {})
+    return validate_config(config)
+
+
+def _key_path(path) -> str:
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<top level>"
+
+
+def _fill_defaults(instance: Any, schema: dict, root: dict) -> None:
+    """Insert the schema's ``default`` values for missing properties (in place)."""
+    if "$ref" in schema:
+        schema = root["$defs"][schema["$ref"].split("/")[-1]]
+    if isinstance(instance, dict):
+        for key, sub in schema.get("properties", {}).items():
+            if key not in instance and "default" in sub:
+                instance[key] = copy.deepcopy(sub["default"])
+            if key in instance:
+                _fill_defaults(instance[key], sub, root)
+        extra = schema.get("additionalProperties")
+        if isinstance(extra, dict):
+            for key, value in instance.items():
+                if key not in schema.get("properties", {}):
+                    _fill_defaults(value, extra, root)
+    elif isinstance(instance, list) and isinstance(schema.get("items"), dict):
+        for item in instance:
+            _fill_defaults(item, schema["items"], root)
+
+
+def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
+    """Validate against the JSON schema, fill defaults, then check cross-references and
+    geometry. Returns a new, completed config; raises ConfigError listing every problem."""
+    with open(schema_path) as stream:
+        schema = yaml.safe_load(stream)
+    validator = jsonschema.Draft202012Validator(schema)
+    problems = [
+        f"config key '{_key_path(err.absolute_path)}': {err.message}"
+        for err in sorted(validator.iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
+    ]
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+    config = copy.deepcopy(config)
+    _fill_defaults(config, schema, schema)
+    problems = _semantic_problems(config)
+    if problems:
+        raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
+    return config
+
+
+def _semantic_problems(config: dict) -> list[str]:
+    problems: list[str] = []
+    presets = config["solver"]["linear_solver_presets"]
+    if config["solver"]["linear_solvers"] not in presets:
+        problems.append(
+            f"config key 'solver.linear_solvers': '{config['solver']['linear_solvers']}' "
+            f"is not a preset; allowed: {sorted(presets)}"
+        )
+    for name, scene in config["scenes"].items():
+        key = f"scenes.{name}"
+        (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+        if not (x0 < x1 and y0 < y1):
+            problems.append(f"config key '{key}.domain': need x[0] < x[1] and y[0] < y[1], got {scene['domain']}")
+            continue
+        if not any("load" in edge.values() for edge in scene["boundary"].values()):
+            problems.append(f"config key '{key}.boundary': no edge component is 'load'; at least one must be")
+        tol = 1e-12 * max(x1 - x0, y1 - y0)
+        for i, notch in enumerate(scene.get("notches", [])):
+            nkey = f"{key}.notches[{i}]"
+            for end in ("start", "end"):
+                px, py = notch[end]
+                if not (x0 - tol <= px <= x1 + tol and y0 - tol <= py <= y1 + tol):
+                    problems.append(
+                        f"config key '{nkey}.{end}': point {notch[end]} lies outside the domain "
+                        f"x in [{x0}, {x1}], y in [{y0}, {y1}]"
+                    )
+            (sx, sy), (ex, ey) = notch["start"], notch["end"]
+            if notch["kind"] == "slit" and abs(sx - ex) > tol and abs(sy - ey) > tol:
+                problems.append(
+                    f"config key '{nkey}': a slit must be horizontal or vertical (along mesh lines), "
+                    f"got {notch['start']} -> {notch['end']}; use kind 'history' for other notches"
+                )
+            if abs(sx - ex) <= tol and abs(sy - ey) <= tol:
+                problems.append(f"config key '{nkey}': start and end coincide")
+    for name, run in config["fem_runs"].items():
+        key = f"fem_runs.{name}"
+        if run["scene"] not in config["scenes"]:
+            problems.append(f"config key '{key}.scene': '{run['scene']}' is not a scene; allowed: {sorted(config['scenes'])}")
+        if run["schedule"] not in config["schedules"]:
+            problems.append(
+                f"config key '{key}.schedule': '{run['schedule']}' is not a schedule; allowed: {sorted(config['schedules'])}"
+            )
+            continue
+        if "linear_solvers" in run and run["linear_solvers"] not in presets:
+            problems.append(f"config key '{key}.linear_solvers': '{run['linear_solvers']}' is not a preset; allowed: {sorted(presets)}")
+        n_inc = sum(seg["increments"] for seg in config["schedules"][run["schedule"]])
+        bad = [i for i in run.get("save_fields", []) if i > n_inc]
+        if bad:
+            problems.append(f"config key '{key}.save_fields': increments {bad} exceed the schedule's {n_inc} increments (allowed 1..{n_inc})")
+    return problems
+
+
+def load_values(schedule: list[dict]) -> list[float]:
+    """Prescribed displacement (mm) after each increment of a schedule, increments 1..N."""
+    values, u = [], 0.0
+    for segment in schedule:
+        for _ in range(segment["increments"]):
+            u += segment["step"]
+            values.append(round(u, 15))
+    return values
+
+
+def fem_run_spec(config: dict, run: str) -> dict:
+    """Everything one FEM run needs, resolved and self-contained (JSON-serialisable)."""
+    if run not in config["fem_runs"]:
+        raise ConfigError(f"unknown FEM run '{run}'; allowed: {sorted(config['fem_runs'])}")
+    entry = config["fem_runs"][run]
+    solver = config["solver"]
+    preset = entry.get("linear_solvers", solver["linear_solvers"])
+    return {
+        "name": run,
+        "scene_name": entry["scene"],
+        "scene": config["scenes"][entry["scene"]],
+        "material": config["material"],
+        "schedule_name": entry["schedule"],
+        "load": load_values(config["schedules"][entry["schedule"]]),
+        "stagger_max_iterations": entry.get("stagger_max_iterations", solver["stagger_max_iterations"]),
+        "stagger_tolerance": entry.get("stagger_tolerance", solver["stagger_tolerance"]),
+        "linear_solvers": preset,
+        "petsc": solver["linear_solver_presets"][preset],
+        "checkpoint_every": solver["checkpoint_every"],
+        "save_fields": sorted(set(entry.get("save_fields", []))),
+        "mpi_ranks": entry.get("mpi_ranks", 1),
+    }
+
+
+def spec_hash(spec: dict) -> str:
+    """Stable short hash of a spec (canonical JSON), recorded in provenance and checkpoints."""
+    text = json.dumps(spec, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -1,0 +1,52 @@
+"""Files: atomic writes, provenance records."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path):
+    """Yield a temporary path beside ``path``; rename it onto ``path`` only if the block
+    finishes, so a half-written file never looks finished."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_json(path: str | Path, data: dict) -> None:
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(json.dumps(data, indent=1, sort_keys=True, default=str))
+
+
+def write_csv(path: str | Path, frame) -> None:
+    """Write a pandas DataFrame atomically (no index column)."""
+    with atomic_path(path) as tmp:
+        frame.to_csv(tmp, index=False)
+
+
+def software_versions() -> dict:
+    versions = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for name in ("numpy", "dolfinx", "petsc4py", "torch", "snakemake", "meshio"):
+        module = sys.modules.get(name)
+        if module is not None:
+            versions[name] = getattr(module, "__version__", "?")
+    return versions
+
+
+def provenance(spec_hash: str, wall_s: float, **extra) -> dict:
+    """A small record written beside every result: what, with what, how long."""
+    return {"spec_hash": spec_hash, "wall_time_s": round(wall_s, 3), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "versions": software_versions(), **extra}

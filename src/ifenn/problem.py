@@ -1,0 +1,234 @@
+"""The discrete fracture problem on dolfinx 0.5.2: spaces, fields, boundary conditions,
+the equilibrium solve, the history update and the reaction force.
+
+Everything (forms, matrices, solvers, expressions) is built once per run; the increment
+loop in ``solver.py`` only reassembles and solves. Gauss-point fields (history H and the
+phase field used in the degradation) live in a Quadrature space with 2x2 points.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import basix
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+from dolfinx import fem, la, mesh as dmesh
+from dolfinx.fem import petsc as fem_petsc
+
+from . import physics
+from .mesh import element_size
+from .pixels import PixelGrid
+
+QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
+EDGE_COMPONENT = {"x": 0, "y": 1}
+
+
+class SolverDivergedError(RuntimeError):
+    """A linear solve failed; the message names the increment, the field and PETSc's reason."""
+
+
+_REASONS = {getattr(PETSc.KSP.ConvergedReason, k): k for k in dir(PETSc.KSP.ConvergedReason) if not k.startswith("_")}
+
+
+def configure_ksp(ksp: PETSc.KSP, prefix: str, options: dict) -> None:
+    """Apply a dictionary of PETSc options under ``prefix`` (the one place solvers are set)."""
+    ksp.setOptionsPrefix(prefix)
+    opts = PETSc.Options()
+    for key, value in options.items():
+        opts[f"{prefix}{key}"] = value
+    ksp.setFromOptions()
+    for key in options:
+        del opts[f"{prefix}{key}"]
+
+
+def check_converged(ksp: PETSc.KSP, what: str) -> int:
+    reason = ksp.getConvergedReason()
+    if reason < 0:
+        raise SolverDivergedError(f"{what} solve diverged: KSP_{_REASONS.get(reason, reason)} after {ksp.getIterationNumber()} iterations")
+    return ksp.getIterationNumber()
+
+
+def _edge_marker(edge: str, domain: dict):
+    (x0, x1), (y0, y1) = domain["x"], domain["y"]
+    tol = 1e-9 * max(x1 - x0, y1 - y0)
+    coordinate, value = {"left": (0, x0), "right": (0, x1), "bottom": (1, y0), "top": (1, y1)}[edge]
+    return lambda x: np.abs(x[coordinate] - value) < tol
+
+
+def rigid_body_modes(V) -> PETSc.NullSpace:
+    """Near-nullspace of 2D elasticity (two translations, one rotation), orthonormalised."""
+    index_map, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+    n_local = index_map.size_local
+    basis = [la.create_petsc_vector(index_map, bs) for _ in range(3)]
+    x = V.tabulate_dof_coordinates()[:n_local]
+    with basis[0].localForm() as b0, basis[1].localForm() as b1, basis[2].localForm() as b2:
+        b0.array[:] = 0.0
+        b1.array[:] = 0.0
+        b0.array[0 : bs * n_local : bs] = 1.0
+        b1.array[1 : bs * n_local : bs] = 1.0
+        b2.array[:] = 0.0
+        b2.array[0 : bs * n_local : bs] = -x[:, 1]
+        b2.array[1 : bs * n_local : bs] = x[:, 0]
+    la.orthonormalize(basis)
+    return PETSc.NullSpace().create(vectors=basis)
+
+
+class FractureProblem:
+    """Fields and the equilibrium/history parts of one scene.
+
+    Attributes (dolfinx Functions): ``displacement`` (vector Q1), ``phase_field`` (nodal Q1,
+    FEM's unknown), ``phase_field_gp`` (Gauss points; the phi used in g(phi)), ``history`` and
+    ``history_previous`` (Gauss points, N/mm^2). ``pixels`` maps Gauss points to pixels.
+    """
+
+    def __init__(self, domain, scene: dict, material: dict, petsc: dict, comm=MPI.COMM_WORLD):
+        self.domain, self.scene, self.material, self.comm = domain, scene, material, comm
+        cell = domain.ufl_cell()
+        self.V = fem.VectorFunctionSpace(domain, ("Lagrange", 1))
+        self.W = fem.FunctionSpace(domain, ("Lagrange", 1))
+        self.Q = fem.FunctionSpace(domain, ufl.FiniteElement("Quadrature", cell, 2, quad_scheme="default"))
+        self.dx = ufl.Measure("dx", domain=domain, metadata=QUADRATURE)
+
+        self.displacement = fem.Function(self.V, name="displacement")
+        self.phase_field = fem.Function(self.W, name="phase_field")
+        self.phase_field_gp = fem.Function(self.Q, name="phase_field_gp")
+        self.history = fem.Function(self.Q, name="history")
+        self.history_previous = fem.Function(self.Q, name="history_previous")
+
+        tdim = domain.topology.dim
+        cell_map = domain.topology.index_map(tdim)
+        self.n_cells_owned = cell_map.size_local
+        self.local_cells = np.arange(cell_map.size_local + cell_map.num_ghosts, dtype=np.int32)
+        self.quadrature_points, _ = basix.make_quadrature(basix.CellType.quadrilateral, 2)
+        self.q_dofs = self.Q.dofmap.list.array.reshape(-1, len(self.quadrature_points))
+
+        # Pixel grid = Gauss-point grid (SPEC section 2).
+        gp_coordinates = fem.Expression(ufl.SpatialCoordinate(domain), self.quadrature_points).eval(self.local_cells)
+        gp_coordinates = gp_coordinates.reshape(len(self.local_cells), -1, 2)
+        self.pixels = PixelGrid.for_scene(scene)
+        self.pixel_of_q_dof = np.empty(self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts, dtype=np.int64)
+        self.pixel_of_q_dof[self.q_dofs] = self.pixels.pixel_index(gp_coordinates)
+        self.owned_q_dofs = self.q_dofs[: self.n_cells_owned].ravel()
+
+        self._build_boundary_conditions()
+        self._build_equilibrium(petsc["displacement"])
+        self._tensile_energy = fem.Expression(
+            physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"]),
+            self.quadrature_points,
+        )
+        self.set_initial_history()
+
+    # ------------------------------------------------------------------ set-up
+    def _build_boundary_conditions(self) -> None:
+        fdim = self.domain.topology.dim - 1
+        self.load = fem.Constant(self.domain, PETSc.ScalarType(0.0))
+        zero = fem.Constant(self.domain, PETSc.ScalarType(0.0))
+        self.bcs, loaded = [], []
+        n_owned = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        for edge, components in self.scene["boundary"].items():
+            facets = dmesh.locate_entities_boundary(self.domain, fdim, _edge_marker(edge, self.scene["domain"]))
+            for component, kind in components.items():
+                sub = self.V.sub(EDGE_COMPONENT[component])
+                dofs = fem.locate_dofs_topological(sub, fdim, facets)
+                self.bcs.append(fem.dirichletbc(self.load if kind == "load" else zero, dofs, sub))
+                if kind == "load":
+                    loaded.append(dofs[dofs < n_owned])
+        self.loaded_dofs = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int32)
+
+    def _build_equilibrium(self, options: dict) -> None:
+        u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
+        self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, self.material) * self.dx)
+        self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * self.dx)
+        self.A_u = fem_petsc.create_matrix(self.equilibrium_form)
+        self.A_u.setNearNullSpace(rigid_body_modes(self.V))
+        self.b_u = fem_petsc.create_vector(self.internal_force_form)
+        self.internal_force = fem_petsc.create_vector(self.internal_force_form)
+        self.ksp_u = PETSc.KSP().create(self.comm)
+        self.ksp_u.setOperators(self.A_u)
+        configure_ksp(self.ksp_u, "displacement_", options)
+        if self.ksp_u.getType() != PETSc.KSP.Type.PREONLY:
+            self.ksp_u.setInitialGuessNonzero(True)
+
+    def set_initial_history(self) -> None:
+        """H0 of 'history' notches (Borden et al. 2012): B Gc/(2 lc) (1 - 4d/lc) for d <= lc/4."""
+        notches = [n for n in self.scene.get("notches", []) if n["kind"] == "history"]
+        values = np.zeros(len(self.pixel_of_q_dof))
+        if notches:
+            Gc, lc, B = self.material["Gc"], self.material["lc"], self.material["history_notch_B"]
+            coords = fem.Expression(ufl.SpatialCoordinate(self.domain), self.quadrature_points).eval(self.local_cells)
+            coords = coords.reshape(-1, 2)
+            distance = np.min([_distance_to_segment(coords, n["start"], n["end"]) for n in notches], axis=0)
+            h0 = np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0)
+            values[self.q_dofs.ravel()] = h0
+        self.history.x.array[:] = values
+        self.history_previous.x.array[:] = values
+
+    # ------------------------------------------------------------------ steps
+    def solve_displacement(self, load_value: float) -> int:
+        """Assemble and solve equilibrium with the current phase_field_gp; returns iterations."""
+        self.load.value = load_value
+        self.A_u.zeroEntries()
+        fem_petsc.assemble_matrix(self.A_u, self.equilibrium_form, bcs=self.bcs)
+        self.A_u.assemble()
+        with self.b_u.localForm() as local:
+            local.set(0.0)
+        fem_petsc.apply_lifting(self.b_u, [self.equilibrium_form], bcs=[self.bcs])
+        self.b_u.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fem_petsc.set_bc(self.b_u, self.bcs)
+        self.ksp_u.solve(self.b_u, self.displacement.vector)
+        self.displacement.x.scatter_forward()
+        return check_converged(self.ksp_u, "displacement")
+
+    def update_history(self) -> None:
+        """H = max(H_previous_increment, psi_0^+(u)) at every Gauss point (local + ghost cells)."""
+        psi = self._tensile_energy.eval(self.local_cells)
+        values = np.empty_like(self.history.x.array)
+        values[self.q_dofs] = psi
+        np.maximum(self.history_previous.x.array, values, out=self.history.x.array)
+
+    def accept_increment(self) -> None:
+        self.history_previous.x.array[:] = self.history.x.array
+
+    def reaction_force(self) -> float:
+        """Sum of the internal force on the loaded dofs (N per mm of thickness)."""
+        with self.internal_force.localForm() as local:
+            local.set(0.0)
+        fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
+        self.internal_force.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        local = float(self.internal_force.array_r[self.loaded_dofs].sum())
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    def max_owned(self, function) -> float:
+        n = function.function_space.dofmap.index_map.size_local * function.function_space.dofmap.index_map_bs
+        return self.comm.allreduce(float(function.x.array[:n].max(initial=-np.inf)), op=MPI.MAX)
+
+    # ------------------------------------------------------------------ pixels
+    def pixels_from_gauss_points(self, function) -> np.ndarray | None:
+        """Gauss-point field -> (ny_px, nx_px) pixel image on rank 0 (None elsewhere)."""
+        index = self.pixel_of_q_dof[self.owned_q_dofs]
+        values = function.x.array[self.owned_q_dofs]
+        if self.comm.size > 1:
+            gathered = self.comm.gather((index, values), root=0)
+            if self.comm.rank != 0:
+                return None
+            index = np.concatenate([g[0] for g in gathered])
+            values = np.concatenate([g[1] for g in gathered])
+        return self.pixels.image_from(index, values)
+
+    def gauss_points_from_pixels(self, image: np.ndarray | None, function) -> None:
+        """Pixel image (given on rank 0) -> Gauss-point field on every rank (incl. ghosts)."""
+        if self.comm.size > 1:
+            image = self.comm.bcast(image, root=0)
+        function.x.array[:] = image.ravel()[self.pixel_of_q_dof]
+
+
+def _distance_to_segment(points: np.ndarray, start, end) -> np.ndarray:
+    a, b = np.asarray(start, float), np.asarray(end, float)
+    ab = b - a
+    t = np.clip(((points - a) @ ab) / (ab @ ab), 0.0, 1.0)
+    return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
+
+
+def element_size_of(scene: dict) -> float:
+    return element_size(scene)

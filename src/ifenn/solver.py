@@ -1,0 +1,276 @@
+"""The staggered increment loop (Miehe et al. 2010) with a pluggable phase-field step,
+resumable checkpoints and the run's outputs.
+
+Per increment: solve u with the current phi, update H = max(H_prev, psi0+), run the
+phase-field step; repeat until max|delta phi| < tol or max_iterations (1 = single pass).
+
+Outputs of a run directory (written atomically, on rank 0):
+  history.csv      one row per increment (HISTORY_COLUMNS)
+  fields.h5        per saved increment: pixel maps 'history', 'phase_field_gp'; nodal
+                   'phase_field' (n_nodes,), 'displacement' (n_nodes, 2) in mesh-file node order
+  paraview.xdmf/.h5  nodal phi and u at the saved increments, for ParaView
+  provenance.json  spec hash, versions, ranks, wall time
+Work files (resumable state, removed when the run completes): .work/
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from .config import spec_hash
+from .io import atomic_path, provenance, write_csv, write_json
+
+log = logging.getLogger(__name__)
+
+HISTORY_COLUMNS = [
+    "increment", "u", "reaction_force", "phi_max", "stagger_iterations",
+    "t_displacement_s", "t_phase_field_s", "t_history_s", "t_increment_s",
+]
+
+
+class NodalMap:
+    """Local dof blocks of a Q1 space <-> node index of the mesh file (rank-independent)."""
+
+    def __init__(self, space):
+        domain = space.mesh
+        geometry_dofs = domain.geometry.dofmap.array.reshape(-1, 4)
+        input_index = np.asarray(domain.geometry.input_global_indices, dtype=np.int64)[geometry_dofs]
+        n_blocks = space.dofmap.index_map.size_local + space.dofmap.index_map.num_ghosts
+        self.node_of_block = np.empty(n_blocks, dtype=np.int64)
+        self.node_of_block[space.dofmap.list.array.reshape(-1, 4)] = input_index
+        self.n_owned = space.dofmap.index_map.size_local
+        self.bs = space.dofmap.index_map_bs
+        self.comm = domain.comm
+        self.n_nodes = self.comm.allreduce(int(self.node_of_block.max(initial=-1)) + 1, op=MPI.MAX)
+
+    def gather(self, function) -> np.ndarray | None:
+        """(n_nodes, bs) array on rank 0, None elsewhere."""
+        index = self.node_of_block[: self.n_owned]
+        values = function.x.array[: self.n_owned * self.bs].reshape(-1, self.bs)
+        parts = self.comm.gather((index, values), root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.zeros((self.n_nodes, self.bs))
+        for index, values in parts:
+            out[index] = values
+        return out
+
+    def scatter(self, array: np.ndarray | None, function) -> None:
+        array = self.comm.bcast(array, root=0)
+        function.x.array[:] = array[self.node_of_block].ravel()
+
+
+def _write_checkpoint(path: Path, state: dict) -> None:
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as stream:
+            np.savez(stream, **state)
+
+
+class StaggeredRun:
+    """One run: a problem, a phase-field step, a load list and an output directory."""
+
+    def __init__(self, problem, phase_field_step, spec: dict, out_dir: str | Path, progress: bool = True):
+        self.problem, self.step, self.spec = problem, phase_field_step, spec
+        self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
+        self.comm = problem.comm
+        self.rank0 = self.comm.rank == 0
+        self.hash = spec_hash(spec)
+        self.progress = progress
+        self.u_map, self.phi_map = NodalMap(problem.V), NodalMap(problem.W)
+        self.rows: list[dict] = []
+        if self.rank0:
+            self.work_dir.mkdir(parents=True, exist_ok=True)
+
+    # ------------------------------------------------------------- state
+    def _state(self) -> dict | None:
+        p = self.problem
+        parts = {
+            "displacement": self.u_map.gather(p.displacement),
+            "phase_field": self.phi_map.gather(p.phase_field),
+            "history": p.pixels_from_gauss_points(p.history),
+            "phase_field_gp": p.pixels_from_gauss_points(p.phase_field_gp),
+        }
+        return parts if self.rank0 else None
+
+    def _restore(self, state: dict | None) -> None:
+        p = self.problem
+        get = (lambda k: state[k]) if self.rank0 else (lambda k: None)
+        self.u_map.scatter(get("displacement"), p.displacement)
+        self.phi_map.scatter(get("phase_field"), p.phase_field)
+        p.gauss_points_from_pixels(get("history"), p.history)
+        p.gauss_points_from_pixels(get("phase_field_gp"), p.phase_field_gp)
+        p.accept_increment()
+
+    def _resume(self) -> int:
+        """Load the checkpoint if it belongs to this spec; returns the last finished increment."""
+        path = self.work_dir / "checkpoint.npz"
+        found = None
+        if self.rank0 and path.exists():
+            with np.load(path, allow_pickle=False) as data:
+                if str(data["spec_hash"]) == self.hash:
+                    found = {k: data[k] for k in data.files}
+                else:
+                    log.warning("ignoring checkpoint of another configuration (%s)", path)
+        found_flag = self.comm.bcast(found is not None, root=0)
+        if not found_flag:
+            return 0
+        self._restore(found)
+        if self.rank0:
+            self.rows = [dict(zip(HISTORY_COLUMNS, row)) for row in found["rows"].tolist()]
+            for row in self.rows:
+                row["increment"], row["stagger_iterations"] = int(row["increment"]), int(row["stagger_iterations"])
+            last = int(found["increment"])
+            log.info("resuming %s after increment %d", self.spec["name"], last)
+        else:
+            last = None
+        return self.comm.bcast(last, root=0)
+
+    def _checkpoint(self, increment: int) -> None:
+        state = self._state()
+        if self.rank0:
+            rows = np.array([[row[c] for c in HISTORY_COLUMNS] for row in self.rows], dtype=float)
+            _write_checkpoint(self.work_dir / "checkpoint.npz",
+                              {**state, "rows": rows, "increment": increment, "spec_hash": self.hash})
+
+    def _snapshot(self, increment: int, u: float) -> None:
+        state = self._state()
+        if self.rank0:
+            _write_checkpoint(self.work_dir / f"fields_{increment:06d}.npz", {**state, "u": u, "increment": increment})
+
+    # ------------------------------------------------------------- loop
+    def run(self) -> list[dict]:
+        spec, p = self.spec, self.problem
+        started = time.perf_counter()
+        first = self._resume() + 1
+        loads = spec["load"]
+        save = set(spec["save_fields"]) | {len(loads)}
+        bar = None
+        if self.rank0 and self.progress:
+            from tqdm import tqdm
+            bar = tqdm(total=len(loads), initial=first - 1, desc=spec["name"], unit="inc",
+                       mininterval=0.5 if os.isatty(2) else 10.0, dynamic_ncols=True)
+        for increment in range(first, len(loads) + 1):
+            u = loads[increment - 1]
+            try:
+                row = self._increment(increment, u)
+            except Exception as error:
+                if bar is not None:
+                    bar.close()
+                raise type(error)(f"run {spec['name']}, increment {increment} (u = {u:g} mm): {error}") from error
+            self.rows.append(row)
+            if increment in save:
+                self._snapshot(increment, u)
+            if increment % spec["checkpoint_every"] == 0 or increment == len(loads):
+                self._checkpoint(increment)
+            if bar is not None:
+                bar.set_postfix(u=f"{u:.2e}", F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", refresh=False)
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+        self._finish(time.perf_counter() - started)
+        return self.rows
+
+    def _increment(self, increment: int, u: float) -> dict:
+        p, step = self.problem, self.step
+        t_u = t_phi = t_h = 0.0
+        t_start = time.perf_counter()
+        previous = p.phase_field_gp.x.array.copy()
+        for iteration in range(1, self.spec["stagger_max_iterations"] + 1):
+            t0 = time.perf_counter()
+            p.solve_displacement(u)
+            t1 = time.perf_counter()
+            p.update_history()
+            t2 = time.perf_counter()
+            step.step()
+            t3 = time.perf_counter()
+            t_u, t_h, t_phi = t_u + t1 - t0, t_h + t2 - t1, t_phi + t3 - t2
+            change = self.comm.allreduce(float(np.max(np.abs(p.phase_field_gp.x.array - previous), initial=0.0)), op=MPI.MAX)
+            if change < self.spec["stagger_tolerance"]:
+                break
+            previous = p.phase_field_gp.x.array.copy()
+        p.accept_increment()
+        force = p.reaction_force()
+        phi_max = step.phase_field_max()
+        if not (np.isfinite(force) and np.isfinite(phi_max)):
+            raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
+        return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max,
+                "stagger_iterations": iteration, "t_displacement_s": t_u, "t_phase_field_s": t_phi,
+                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start}
+
+    # ------------------------------------------------------------- outputs
+    def _finish(self, wall_s: float) -> None:
+        self._write_paraview()
+        if self.rank0:
+            import pandas as pd
+
+            self._write_fields()
+            write_csv(self.out_dir / "history.csv", pd.DataFrame(self.rows, columns=HISTORY_COLUMNS))
+            write_json(self.out_dir / "provenance.json", provenance(
+                self.hash, wall_s, run=self.spec["name"], mpi_ranks=self.comm.size,
+                phase_field_step=self.step.name, increments=len(self.rows)))
+            for path in self.work_dir.glob("*"):
+                path.unlink()
+            self.work_dir.rmdir()
+        self.comm.barrier()
+
+    def _snapshots(self) -> list[Path]:
+        return sorted(self.work_dir.glob("fields_*.npz"))
+
+    def _write_fields(self) -> None:
+        import h5py
+
+        with atomic_path(self.out_dir / "fields.h5") as tmp:
+            with h5py.File(tmp, "w") as h5:
+                h5.attrs.update({**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash})
+                for path in self._snapshots():
+                    with np.load(path) as data:
+                        group = h5.create_group(f"increment_{int(data['increment']):06d}")
+                        group.attrs.update({"u": float(data["u"]), "increment": int(data["increment"])})
+                        for key in ("history", "phase_field_gp", "phase_field", "displacement"):
+                            values = data[key]
+                            group.create_dataset(key, data=values[:, 0] if key == "phase_field" else values, compression="gzip")
+
+    def _write_paraview(self) -> None:
+        """XDMF of nodal phi and u at the saved increments (time = u), written in a temporary
+        folder and moved, so the pair appears complete."""
+        from dolfinx import io
+
+        snapshots = self.comm.bcast([str(s) for s in self._snapshots()] if self.rank0 else None, root=0)
+        tmp_dir = self.out_dir / ".work" / "paraview"
+        if self.rank0:
+            tmp_dir.mkdir(parents=True, exist_ok=True)
+        self.comm.barrier()
+        p = self.problem
+        with io.XDMFFile(self.comm, str(tmp_dir / "paraview.xdmf"), "w") as xdmf:
+            xdmf.write_mesh(p.domain)
+            for path in snapshots:
+                data = dict(np.load(path)) if self.rank0 else None
+                self.u_map.scatter(data["displacement"] if data else None, p.displacement)
+                self.phi_map.scatter(data["phase_field"] if data else None, p.phase_field)
+                u = self.comm.bcast(float(data["u"]) if data else None, root=0)
+                xdmf.write_function(p.displacement, u)
+                xdmf.write_function(p.phase_field, u)
+        self.comm.barrier()
+        if self.rank0:
+            for name in ("paraview.h5", "paraview.xdmf"):
+                os.replace(tmp_dir / name, self.out_dir / name)
+            tmp_dir.rmdir()
+
+
+def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True) -> list[dict]:
+    """Run a plain-FEM phase-field analysis described by ``spec`` (config.fem_run_spec)."""
+    from .mesh import read_dolfinx_mesh
+    from .phase_field_steps import FEMPhaseField
+    from .problem import FractureProblem
+
+    comm = MPI.COMM_WORLD
+    domain = read_dolfinx_mesh(mesh_path, comm)
+    problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
+    step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
+    return StaggeredRun(problem, step, spec, out_dir, progress).run()

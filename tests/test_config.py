@@ -1,0 +1,50 @@
+"""Bad configuration fails at once with the key, the value and what is allowed."""
+
+import copy
+
+import pytest
+
+from ifenn.config import ConfigError, fem_run_spec, load_values, validate_config
+
+
+def test_paper_config_has_the_seven_runs(paper_config):
+    assert set(paper_config["fem_runs"]) == {"snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"}
+    assert len(fem_run_spec(paper_config, "snt1-III")["load"]) == 1500
+
+
+def test_schedule_values():
+    values = load_values([{"increments": 500, "step": 1e-5}, {"increments": 1000, "step": 1e-6}])
+    assert len(values) == 1500
+    assert values[499] == pytest.approx(5e-3)
+    assert values[-1] == pytest.approx(6e-3)
+
+
+@pytest.mark.parametrize(
+    "mutate, expected",
+    [
+        (lambda c: c["scenes"]["snt1"].update(elements=[0, 200]), ["scenes.snt1.elements[0]", "minimum of 2"]),
+        (lambda c: c["material"].update(Gc=-1.0), ["material.Gc", "-1.0"]),
+        (lambda c: c["fem_runs"]["sdnt"].update(schedule="IV"), ["fem_runs.sdnt.schedule", "'IV'", "allowed"]),
+        (lambda c: c["scenes"]["snt1"]["notches"][0].update(kind="crack"), ["notches[0].kind", "'crack'", "slit"]),
+        (lambda c: c["scenes"]["snt1"]["notches"][0].update(end=[0.7, 0.0]), ["notches[0].end", "outside the domain"]),
+        (lambda c: c["scenes"]["snt1"]["notches"][0].update(end=[-0.2, 0.1]), ["horizontal or vertical"]),
+        (lambda c: c["scenes"]["snt1"]["boundary"]["top"].update(y="fixed"), ["snt1.boundary", "load"]),
+        (lambda c: c["fem_runs"]["snt1-I"].update(save_fields=[351]), ["save_fields", "351", "1..350"]),
+        (lambda c: c["solver"].update(linear_solvers="fast"), ["solver.linear_solvers", "'fast'", "iterative"]),
+        (lambda c: c.update(materials={}), ["Additional properties", "materials"]),
+        (lambda c: c["schedules"]["I"][0].update(step=0.0), ["schedules.I[0].step", "0.0"]),
+    ],
+)
+def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):
+    config = copy.deepcopy(paper_config)
+    mutate(config)
+    with pytest.raises(ConfigError) as info:
+        validate_config(config)
+    for text in expected:
+        assert text in str(info.value), str(info.value)
+
+
+def test_defaults_are_filled(paper_config):
+    config = copy.deepcopy(paper_config)
+    del config["material"]["residual_stiffness"]
+    assert validate_config(config)["material"]["residual_stiffness"] == 0.0

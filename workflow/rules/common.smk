@@ -1,0 +1,29 @@
+# Validate the configuration before any job starts; helpers shared by the rules.
+import json
+import sys
+
+from ifenn.config import ConfigError, fem_run_spec, validate_config
+
+try:
+    _validated = validate_config(config)
+except ConfigError as error:
+    raise WorkflowError(str(error)) from None
+config.clear()
+config.update(_validated)
+
+PYTHON = sys.executable
+SCRIPTS = os.path.join(workflow.basedir, "workflow", "scripts")
+MPI_LAUNCHER = "mpirun -n {ranks} --oversubscribe"
+
+
+def fem_spec_json(run):
+    return json.dumps(fem_run_spec(config, run), sort_keys=True)
+
+
+def fem_ranks(wildcards):
+    return config["fem_runs"][wildcards.run].get("mpi_ranks", 1)
+
+
+def fem_launcher(wildcards):
+    ranks = fem_ranks(wildcards)
+    return MPI_LAUNCHER.format(ranks=ranks) if ranks > 1 else ""

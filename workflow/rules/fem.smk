@@ -1,0 +1,53 @@
+# Plain-FEM phase-field reference runs (staggered, dolfinx).
+
+
+rule fem_spec:
+    # The resolved, self-contained description of one run; it changes (and reruns the run)
+    # only when a config value the run depends on changes.
+    output:
+        "results/fem/{run}/spec.json",
+    params:
+        spec=lambda w: fem_spec_json(w.run),
+    run:
+        from ifenn.io import write_json
+
+        write_json(output[0], json.loads(params.spec))
+
+
+rule fem:
+    input:
+        spec="results/fem/{run}/spec.json",
+        mesh=lambda w: f"results/mesh/{config['fem_runs'][w.run]['scene']}.xdmf",
+    output:
+        history="results/fem/{run}/history.csv",
+        fields="results/fem/{run}/fields.h5",
+        xdmf="results/fem/{run}/paraview.xdmf",
+        xdmf_h5="results/fem/{run}/paraview.h5",
+        provenance="results/fem/{run}/provenance.json",
+    params:
+        launcher=fem_launcher,
+        out="results/fem/{run}",
+    threads: 1
+    resources:
+        mpi="mpirun",
+        tasks=fem_ranks,
+        mem_mb=4000,
+        runtime=240,
+    log:
+        "logs/fem/{run}.log",
+    benchmark:
+        "benchmarks/fem/{run}.tsv"
+    shell:
+        "OMP_NUM_THREADS=1 {params.launcher} {PYTHON} -m ifenn fem --spec {input.spec} --mesh {input.mesh}"
+        " --out {params.out} > {log} 2>&1"
+
+
+rule fem_force_figure:
+    input:
+        history="results/fem/{run}/history.csv",
+    output:
+        report("results/figures/fem/{run}_force_displacement.png", caption="../report/fem_force.rst", category="FEM reference runs"),
+    log:
+        "logs/figures/fem_{run}.log",
+    script:
+        "../scripts/fem_force_figure.py"

@@ -1,0 +1,27 @@
+# Structured Q1 meshes with slit notches (meshio XDMF + HDF5) and a picture of each scene.
+
+
+rule mesh:
+    output:
+        xdmf="results/mesh/{scene}.xdmf",
+        h5="results/mesh/{scene}.h5",
+        meta="results/mesh/{scene}.json",
+    params:
+        scene=lambda w: config["scenes"][w.scene],
+    log:
+        "logs/mesh/{scene}.log",
+    script:
+        "../scripts/mesh.py"
+
+
+rule mesh_figure:
+    input:
+        xdmf="results/mesh/{scene}.xdmf",
+    output:
+        report("results/mesh/{scene}.png", caption="../report/mesh.rst", category="Scenes"),
+    params:
+        scene=lambda w: config["scenes"][w.scene],
+    log:
+        "logs/mesh/{scene}_figure.log",
+    script:
+        "../scripts/mesh_figure.py"
