@@ -22,7 +22,7 @@ def test_interior_slit_keeps_both_tips_shared():
     np.testing.assert_allclose(twins[:, 1], 0.5)
     np.testing.assert_allclose(np.sort(twins[:, 0]), [0.3, 0.4, 0.5, 0.6])
     # every twin is used by exactly the two cells above the slit, its original by the two below
-    for k, twin in enumerate(range(mesh.n_grid_nodes, len(mesh.points))):
+    for twin in range(mesh.n_grid_nodes, len(mesh.points)):
         users = np.nonzero((mesh.cells == twin).any(axis=1))[0]
         assert len(users) == 2
         centroids = mesh.points[mesh.cells[users]].mean(axis=1)

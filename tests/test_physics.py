@@ -4,9 +4,9 @@ AT2 profile, the homogeneous phase-field solution, the pixel map, separating sli
 import numpy as np
 import pytest
 import ufl
+from conftest import build_problem
 from dolfinx import fem
 
-from conftest import build_problem
 from ifenn.phase_field_steps import FEMPhaseField
 
 

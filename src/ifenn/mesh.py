@@ -65,7 +65,7 @@ def _snap(value: float, origin: float, h: float, n: int) -> int:
 
 def build_mesh(scene: dict) -> StructuredMesh:
     """Structured Q1 mesh of ``scene`` (config entry) with its slit notches cut in."""
-    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    x0, y0 = scene["domain"]["x"][0], scene["domain"]["y"][0]
     nx, ny = scene["elements"]
     h = element_size(scene)
     ii, jj = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1))
@@ -105,11 +105,10 @@ def build_mesh(scene: dict) -> StructuredMesh:
         used.update(ids.tolist())
         twin_ids = len(points) + sum(len(t) for t in twins) + np.arange(len(ids))
         twins.append(ids)
-        twin_of = dict(zip(ids.tolist(), twin_ids.tolist()))
+        twin_of = dict(zip(ids.tolist(), twin_ids.tolist(), strict=False))
         # Elements on the upper (horizontal) / right (vertical) side use the twins.
         side = (cj == line) & (ci >= a) & (ci < b) if horizontal else (ci == line) & (cj >= a) & (cj < b)
-        block = cells[side]
-        cells[side] = np.vectorize(lambda n: twin_of.get(n, n), otypes=[np.int64])(block)
+        cells[side] = np.vectorize(twin_of.get, otypes=[np.int64])(cells[side], cells[side])
         snapped = (
             [[x0 + a * h, y0 + line * h], [x0 + b * h, y0 + line * h]] if horizontal
             else [[x0 + line * h, y0 + a * h], [x0 + line * h, y0 + b * h]]
@@ -146,8 +145,8 @@ def read_metadata(xdmf_path: str | Path) -> dict:
 
 def read_dolfinx_mesh(xdmf_path: str | Path, comm=None):
     """Read a mesh written by ``write_mesh`` into dolfinx (distributed over ``comm``)."""
-    from mpi4py import MPI
     from dolfinx import io
+    from mpi4py import MPI
 
     with io.XDMFFile(comm or MPI.COMM_WORLD, str(xdmf_path), "r") as stream:
         return stream.read_mesh(name="Grid")

@@ -9,9 +9,9 @@ hybrid IFENN steps (PICNN, exact pixel solver) plug into the same interface.
 from __future__ import annotations
 
 import ufl
-from petsc4py import PETSc
 from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
+from petsc4py import PETSc
 
 from . import physics
 from .problem import FractureProblem, check_converged, configure_ksp

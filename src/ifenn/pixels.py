@@ -21,7 +21,7 @@ class PixelGrid:
     ny_px: int
 
     @classmethod
-    def for_scene(cls, scene: dict) -> "PixelGrid":
+    def for_scene(cls, scene: dict) -> PixelGrid:
         (x0, x1), (y0, _) = scene["domain"]["x"], scene["domain"]["y"]
         nx, ny = scene["elements"]
         return cls(float(x0), float(y0), (x1 - x0) / nx / 2.0, 2 * nx, 2 * ny)

@@ -59,7 +59,7 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
             ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span, f"u{c} = u",
                     ha="center", va="center", color="tab:green", fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
-    unique = dict(zip(labels, handles))
+    unique = dict(zip(labels, handles, strict=False))
     if unique:
         ax.legend(unique.values(), unique.keys(), loc="upper right", fontsize=7)
     ax.set_aspect("equal")

@@ -8,13 +8,14 @@ phase field used in the degradation) live in a Quadrature space with 2x2 points.
 
 from __future__ import annotations
 
-import numpy as np
 import basix
+import numpy as np
 import ufl
+from dolfinx import fem, la
+from dolfinx import mesh as dmesh
+from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
-from dolfinx import fem, la, mesh as dmesh
-from dolfinx.fem import petsc as fem_petsc
 
 from . import physics
 from .mesh import element_size

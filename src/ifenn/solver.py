@@ -122,7 +122,7 @@ class StaggeredRun:
             return 0
         self._restore(found)
         if self.rank0:
-            self.rows = [dict(zip(HISTORY_COLUMNS, row)) for row in found["rows"].tolist()]
+            self.rows = [dict(zip(HISTORY_COLUMNS, row, strict=False)) for row in found["rows"].tolist()]
             for row in self.rows:
                 row["increment"], row["stagger_iterations"] = int(row["increment"]), int(row["stagger_iterations"])
             last = int(found["increment"])
@@ -145,7 +145,7 @@ class StaggeredRun:
 
     # ------------------------------------------------------------- loop
     def run(self) -> list[dict]:
-        spec, p = self.spec, self.problem
+        spec = self.spec
         started = time.perf_counter()
         first = self._resume() + 1
         loads = spec["load"]
@@ -181,7 +181,7 @@ class StaggeredRun:
         t_u = t_phi = t_h = 0.0
         t_start = time.perf_counter()
         previous = p.phase_field_gp.x.array.copy()
-        for iteration in range(1, self.spec["stagger_max_iterations"] + 1):
+        for iteration in range(1, self.spec["stagger_max_iterations"] + 1):  # noqa: B007 (reported below)
             t0 = time.perf_counter()
             p.solve_displacement(u)
             t1 = time.perf_counter()

@@ -26,7 +26,8 @@ rule fem:
         provenance="results/fem/{run}/provenance.json",
     params:
         launcher=fem_launcher,
-        out="results/fem/{run}",
+        python=PYTHON,
+        out=lambda w, output: os.path.dirname(output.history),
     threads: 1
     resources:
         mpi="mpirun",
@@ -38,7 +39,7 @@ rule fem:
     benchmark:
         "benchmarks/fem/{run}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.launcher} {PYTHON} -m ifenn fem --spec {input.spec} --mesh {input.mesh}"
+        "OMP_NUM_THREADS=1 {params.launcher} {params.python} -m ifenn fem --spec {input.spec} --mesh {input.mesh}"
         " --out {params.out} > {log} 2>&1"
 
 

@@ -1,0 +1,52 @@
+"""The workflow through Snakemake: the quick profile end to end from another directory,
+and a bad config value stopping everything before any job starts."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
+
+
+def _snakemake(*args, cwd):
+    return subprocess.run([*SNAKEMAKE, *args], cwd=cwd, env=ENV, capture_output=True, text=True, timeout=1800)
+
+
+@pytest.fixture(scope="module")
+def quick_workflow(tmp_path_factory):
+    work = tmp_path_factory.mktemp("quick")
+    result = _snakemake("--directory", str(work), "--configfile", str(REPO / "config" / "quick.yaml"),
+                        "--cores", "2", "all", cwd=tmp_path_factory.getbasetemp())
+    assert result.returncode == 0, result.stderr[-4000:]
+    return work
+
+
+def test_quick_profile_runs_end_to_end(quick_workflow):
+    for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
+        history = pd.read_csv(quick_workflow / "results" / "fem" / run / "history.csv")
+        assert history.reaction_force.max() > 0
+        assert (quick_workflow / "results" / "figures" / "fem" / f"{run}_force_displacement.png").stat().st_size > 10_000
+        assert (quick_workflow / "results" / "fem" / run / "provenance.json").exists()
+    for scene in ("snt1", "snt2", "snt3", "sdnt", "adnt"):
+        assert (quick_workflow / "results" / "mesh" / f"{scene}.png").exists()
+
+
+def test_rerun_has_nothing_to_do(quick_workflow):
+    result = _snakemake("--directory", str(quick_workflow), "--configfile", str(REPO / "config" / "quick.yaml"),
+                        "-n", "--cores", "1", "all", cwd=quick_workflow)
+    assert result.returncode == 0
+    assert "Nothing to be done" in result.stdout + result.stderr
+
+
+def test_bad_config_fails_before_any_job(tmp_path):
+    result = _snakemake("--directory", str(tmp_path), "--configfile", str(REPO / "config" / "quick.yaml"),
+                        "--config", "material={Gc: -2.7}", "--cores", "1", "all", cwd=tmp_path)
+    assert result.returncode != 0
+    assert "material.Gc" in result.stderr and "-2.7" in result.stderr
+    assert not (tmp_path / "results").exists()
