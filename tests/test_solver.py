@@ -119,8 +119,11 @@ def test_killed_run_resumes_to_the_same_history(quick_spec, quick_config, tmp_pa
     np.testing.assert_allclose(resumed.reaction_force, reference.reaction_force, rtol=1e-10, atol=1e-10 * scale)
     np.testing.assert_allclose(resumed.phi_max, reference.phi_max, rtol=1e-10)
     assert not (tmp_path / "killed" / ".work").exists()
+    switch = int(reference.increment[reference.phi_max > spec["switch_phi_max"]].iloc[0])
     with h5py.File(tmp_path / "killed" / "fields.h5") as h5:
-        assert sorted(h5) == ["increment_000040", "increment_000070"]
+        # configured increments, the switch-over increment (state for a hybrid run), the last
+        assert sorted(h5) == sorted({f"increment_{i:06d}" for i in (40, switch, 70)})
+        assert h5.attrs["switch_increment"] == switch
 
 
 def test_checkpoint_of_another_configuration_is_ignored(quick_spec, tmp_path):

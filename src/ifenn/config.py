@@ -175,6 +175,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
         "petsc": solver["linear_solver_presets"][preset],
         "checkpoint_every": solver["checkpoint_every"],
         "save_fields": sorted(set(entry.get("save_fields", []))),
+        "switch_phi_max": config["ifenn"]["switch_phi_max"],
         "mpi_ranks": entry.get("mpi_ranks", 1),
     }
 

@@ -7,7 +7,9 @@ phase-field step; repeat until max|delta phi| < tol or max_iterations (1 = singl
 Outputs of a run directory (written atomically, on rank 0):
   history.csv      one row per increment (HISTORY_COLUMNS)
   fields.h5        per saved increment: pixel maps 'history', 'phase_field_gp'; nodal
-                   'phase_field' (n_nodes,), 'displacement' (n_nodes, 2) in mesh-file node order
+                   'phase_field' (n_nodes,), 'displacement' (n_nodes, 2) in mesh-file node order.
+                   The first increment whose phi_max exceeds spec['switch_phi_max'] is always
+                   saved (root attr 'switch_increment', -1 if none): a hybrid run starts there.
   paraview.xdmf/.h5  nodal phi and u at the saved increments, for ParaView
   provenance.json  spec hash, versions, ranks, wall time
 Work files (resumable state, removed when the run completes): .work/
@@ -150,6 +152,8 @@ class StaggeredRun:
         first = self._resume() + 1
         loads = spec["load"]
         save = set(spec["save_fields"]) | {len(loads)}
+        self.switch_increment = self.comm.bcast(
+            next((r["increment"] for r in self.rows if r["phi_max"] > spec["switch_phi_max"]), None), root=0)
         bar = None
         if self.rank0 and self.progress:
             from tqdm import tqdm
@@ -164,6 +168,9 @@ class StaggeredRun:
                     bar.close()
                 raise type(error)(f"run {spec['name']}, increment {increment} (u = {u:g} mm): {error}") from error
             self.rows.append(row)
+            if self.switch_increment is None and row["phi_max"] > spec["switch_phi_max"]:
+                self.switch_increment = increment
+                save.add(increment)
             if increment in save:
                 self._snapshot(increment, u)
             if increment % spec["checkpoint_every"] == 0 or increment == len(loads):
@@ -227,7 +234,8 @@ class StaggeredRun:
 
         with atomic_path(self.out_dir / "fields.h5") as tmp:
             with h5py.File(tmp, "w") as h5:
-                h5.attrs.update({**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash})
+                h5.attrs.update({**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash,
+                                 "switch_increment": self.switch_increment or -1})
                 for path in self._snapshots():
                     with np.load(path) as data:
                         group = h5.create_group(f"increment_{int(data['increment']):06d}")
