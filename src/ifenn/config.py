@@ -142,6 +142,11 @@ def _semantic_problems(config: dict) -> list[str]:
         bad = [i for i in run.get("save_fields", []) if i > n_inc]
         if bad:
             problems.append(f"config key '{key}.save_fields': increments {bad} exceed the schedule's {n_inc} increments (allowed 1..{n_inc})")
+    for name, run in config.get("ifenn_runs", {}).items():
+        if run["fem_run"] not in config["fem_runs"]:
+            problems.append(
+                f"config key 'ifenn_runs.{name}.fem_run': '{run['fem_run']}' is not a FEM run; allowed: {sorted(config['fem_runs'])}"
+            )
     return problems
 
 
@@ -178,6 +183,24 @@ def fem_run_spec(config: dict, run: str) -> dict:
         "switch_phi_max": config["ifenn"]["switch_phi_max"],
         "mpi_ranks": entry.get("mpi_ranks", 1),
     }
+
+
+IFENN_OPTIONS = ("predictor", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
+
+
+def ifenn_run_spec(config: dict, run: str) -> dict:
+    """An IFENN run: the spec of its FEM run (scene, schedule, solvers, switch threshold)
+    plus the hybrid options (config 'ifenn', overridden per run)."""
+    if run not in config.get("ifenn_runs", {}):
+        raise ConfigError(f"unknown IFENN run '{run}'; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    entry = config["ifenn_runs"][run]
+    spec = fem_run_spec(config, entry["fem_run"])
+    spec.update(name=run, fem_run=entry["fem_run"], save_fields=spec["save_fields"])
+    for key in IFENN_OPTIONS:
+        spec[key] = entry.get(key, config["ifenn"][key])
+    for key in ("stagger_max_iterations", "stagger_tolerance"):
+        spec[key] = entry.get(key, spec[key])
+    return spec
 
 
 def spec_hash(spec: dict) -> str:

@@ -8,6 +8,9 @@ hybrid IFENN steps (PICNN, exact pixel solver) plug into the same interface.
 
 from __future__ import annotations
 
+import time
+
+import numpy as np
 import ufl
 from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
@@ -21,6 +24,7 @@ class FEMPhaseField:
     """Nodal Q1 phase-field solve (forms, matrix and KSP built once)."""
 
     name = "fem"
+    extra_columns = ()
 
     def __init__(self, problem: FractureProblem, options: dict):
         self.problem = problem
@@ -36,6 +40,7 @@ class FEMPhaseField:
         if self.ksp.getType() != PETSc.KSP.Type.PREONLY:
             self.ksp.setInitialGuessNonzero(True)
         self._at_gauss_points = fem.Expression(problem.phase_field, problem.quadrature_points)
+        self.timings: dict = {}
 
     def step(self) -> int:
         """Assemble with the current history, solve for nodal phi, evaluate it at the Gauss
@@ -56,3 +61,50 @@ class FEMPhaseField:
 
     def phase_field_max(self) -> float:
         return self.problem.max_owned(self.problem.phase_field)
+
+
+class PixelPhaseField:
+    """The IFENN phase-field step (SPEC section 5, steps 2-4), with a pluggable predictor:
+
+    H at Gauss points -> pixels, capped to [0, H_cap] -> predictor -> phi pixels ->
+    optional Gaussian smoothing -> Gauss points, with irreversibility phi_gp = max(phi_gp, new).
+
+    ``predictor`` maps a capped (ny, nx) history image (N/mm^2) to a phi image: the trained
+    PICNN (``model.predict``) or the exact solution of the same pixel equation
+    (``picnn.solve_pixel_equation``), which separates network error from coupling error.
+    Pixel work happens on rank 0; Gauss-point fields are scattered back to every rank.
+    """
+
+    extra_columns = ("t_inference_s",)
+
+    def __init__(self, problem: FractureProblem, predictor, name: str, history_cap: float,
+                 smoothing_sigma: float | None, smoothing_truncate: float = 4.0, irreversible: bool = True):
+        self.problem, self.predictor, self.name = problem, predictor, name
+        self.history_cap, self.irreversible = history_cap, irreversible
+        self.smoothing_sigma, self.smoothing_truncate = smoothing_sigma, smoothing_truncate
+        self._new_phase_field = fem.Function(problem.Q)
+        self.timings = {"t_inference_s": 0.0}
+
+    def step(self) -> int:
+        from .picnn import gaussian_smoothing
+
+        problem = self.problem
+        image = problem.pixels_from_gauss_points(problem.history)
+        phi = None
+        if image is not None:
+            capped = np.clip(image, 0.0, self.history_cap)
+            started = time.perf_counter()
+            phi = self.predictor(capped)
+            self.timings["t_inference_s"] += time.perf_counter() - started
+            if self.smoothing_sigma:
+                phi = gaussian_smoothing(phi, sigma=self.smoothing_sigma, truncate=self.smoothing_truncate)
+        problem.gauss_points_from_pixels(phi, self._new_phase_field)
+        new = self._new_phase_field.x.array
+        if self.irreversible:
+            np.maximum(problem.phase_field_gp.x.array, new, out=problem.phase_field_gp.x.array)
+        else:
+            problem.phase_field_gp.x.array[:] = new
+        return 0
+
+    def phase_field_max(self) -> float:
+        return self.problem.max_owned(self.problem.phase_field_gp)

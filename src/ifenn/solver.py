@@ -77,8 +77,14 @@ def _write_checkpoint(path: Path, state: dict) -> None:
 class StaggeredRun:
     """One run: a problem, a phase-field step, a load list and an output directory."""
 
-    def __init__(self, problem, phase_field_step, spec: dict, out_dir: str | Path, progress: bool = True):
+    def __init__(self, problem, phase_field_step, spec: dict, out_dir: str | Path, progress: bool = True,
+                 start: dict | None = None, row_constants: dict | None = None):
+        """``start``: optional {'increment': k, 'state': state dict (rank 0), 'rows': rows 1..k}
+        to continue another run's state (a hybrid run from the FEM switch-over increment).
+        ``row_constants``: columns with a fixed value on every computed row."""
         self.problem, self.step, self.spec = problem, phase_field_step, spec
+        self.start, self.row_constants = start, dict(row_constants or {})
+        self.columns = HISTORY_COLUMNS + list(phase_field_step.extra_columns) + list(self.row_constants)
         self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
         self.comm = problem.comm
         self.rank0 = self.comm.rank == 0
@@ -121,12 +127,17 @@ class StaggeredRun:
                     log.warning("ignoring checkpoint of another configuration (%s)", path)
         found_flag = self.comm.bcast(found is not None, root=0)
         if not found_flag:
-            return 0
+            if self.start is None:
+                return 0
+            self._restore(self.start["state"] if self.rank0 else None)
+            self.rows = [dict(row) for row in self.start["rows"]] if self.rank0 else []
+            return int(self.start["increment"])
         self._restore(found)
         if self.rank0:
-            self.rows = [dict(zip(HISTORY_COLUMNS, row, strict=False)) for row in found["rows"].tolist()]
+            self.rows = [dict(zip(self.columns, row, strict=True)) for row in found["rows"].tolist()]
             for row in self.rows:
-                row["increment"], row["stagger_iterations"] = int(row["increment"]), int(row["stagger_iterations"])
+                for key in ("increment", "stagger_iterations", *self.row_constants):
+                    row[key] = int(row[key])
             last = int(found["increment"])
             log.info("resuming %s after increment %d", self.spec["name"], last)
         else:
@@ -136,7 +147,7 @@ class StaggeredRun:
     def _checkpoint(self, increment: int) -> None:
         state = self._state()
         if self.rank0:
-            rows = np.array([[row[c] for c in HISTORY_COLUMNS] for row in self.rows], dtype=float)
+            rows = np.array([[row[c] for c in self.columns] for row in self.rows], dtype=float)
             _write_checkpoint(self.work_dir / "checkpoint.npz",
                               {**state, "rows": rows, "increment": increment, "spec_hash": self.hash})
 
@@ -185,6 +196,8 @@ class StaggeredRun:
 
     def _increment(self, increment: int, u: float) -> dict:
         p, step = self.problem, self.step
+        for key in step.timings:
+            step.timings[key] = 0.0
         t_u = t_phi = t_h = 0.0
         t_start = time.perf_counter()
         previous = p.phase_field_gp.x.array.copy()
@@ -208,7 +221,7 @@ class StaggeredRun:
             raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max,
                 "stagger_iterations": iteration, "t_displacement_s": t_u, "t_phase_field_s": t_phi,
-                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start}
+                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **step.timings, **self.row_constants}
 
     # ------------------------------------------------------------- outputs
     def _finish(self, wall_s: float) -> None:
@@ -217,7 +230,7 @@ class StaggeredRun:
             import pandas as pd
 
             self._write_fields()
-            write_csv(self.out_dir / "history.csv", pd.DataFrame(self.rows, columns=HISTORY_COLUMNS))
+            write_csv(self.out_dir / "history.csv", pd.DataFrame(self.rows, columns=self.columns))
             write_json(self.out_dir / "provenance.json", provenance(
                 self.hash, wall_s, run=self.spec["name"], mpi_ranks=self.comm.size,
                 phase_field_step=self.step.name, increments=len(self.rows)))

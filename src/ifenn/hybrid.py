@@ -1,0 +1,71 @@
+"""IFENN runs: plain FEM up to the switch-over increment (taken from the FEM reference run,
+never recomputed), then the same staggered loop with a pixel-based phase-field step.
+
+history.csv of an IFENN run = the FEM columns + t_inference_s + hybrid_active (0 for the
+increments copied from the FEM run, 1 for the hybrid ones).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import pandas as pd
+from mpi4py import MPI
+
+PREDICTORS = ("picnn", "exact_pixel")
+
+
+def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
+    """(switch increment, state at its end, FEM history rows 1..switch) of a FEM run; the
+    increment is -1 (and the state None) if the FEM run never reached the threshold."""
+    fem_dir = Path(fem_dir)
+    with h5py.File(fem_dir / "fields.h5", "r") as h5:
+        switch = int(h5.attrs["switch_increment"])
+        state = None
+        if switch > 0:
+            group = h5[f"increment_{switch:06d}"]
+            state = {key: group[key][()] for key in ("displacement", "phase_field", "history", "phase_field_gp")}
+            state["phase_field"] = state["phase_field"][:, None]
+    history = pd.read_csv(fem_dir / "history.csv")
+    rows = history[history.increment <= max(switch, 0)].to_dict("records") if switch > 0 else history.to_dict("records")
+    for row in rows:
+        row.update(t_inference_s=0.0, hybrid_active=0)
+    return switch, state, rows
+
+
+def make_predictor(spec: dict, model_path: str | Path | None, h_px: float):
+    """The phase-field predictor of a hybrid run: H image (capped) -> phi image."""
+    if spec["predictor"] == "picnn":
+        from .picnn import load_picnn
+
+        model, _ = load_picnn(model_path)
+        return model.predict
+    if spec["predictor"] == "exact_pixel":
+        from .picnn import solve_pixel_equation
+
+        Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
+        return lambda history: solve_pixel_equation(history, Gc, lc, h_px, spec["pixel_padding"])
+    raise ValueError(f"ifenn predictor '{spec['predictor']}' is unknown; allowed: {PREDICTORS}")
+
+
+def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True) -> list[dict]:
+    """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN."""
+    from .mesh import read_dolfinx_mesh
+    from .phase_field_steps import PixelPhaseField
+    from .problem import FractureProblem
+    from .solver import StaggeredRun
+
+    comm = MPI.COMM_WORLD
+    switch, state, rows = switch_state(fem_dir) if comm.rank == 0 else (None, None, None)
+    switch = comm.bcast(switch, root=0)
+    if switch <= 0:
+        raise RuntimeError(f"FEM run {fem_dir} never reached phi_max > {spec['switch_phi_max']}: nothing for IFENN to take over")
+    domain = read_dolfinx_mesh(mesh_path, comm)
+    problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
+    predictor = make_predictor(spec, model_path, problem.pixels.h_px) if comm.rank == 0 else None
+    step = PixelPhaseField(problem, predictor, spec["predictor"], spec["history_cap"], spec["smoothing_sigma"],
+                           spec["smoothing_truncate"], spec["irreversible"])
+    start = {"increment": switch, "state": state, "rows": rows}
+    run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1})
+    return run.run()

@@ -1,0 +1,60 @@
+"""IFENN on the FEM loop: the exact pixel solver must track FEM; the known defects
+(zero padding, smoothing) must show as measurable residual force."""
+
+import copy
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ifenn.config import IFENN_OPTIONS, fem_run_spec
+from ifenn.hybrid import run_ifenn
+from ifenn.mesh import build_mesh, write_mesh
+from ifenn.solver import run_fem
+
+
+@pytest.fixture(scope="module")
+def fem_run(quick_config, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("hybrid")
+    spec = fem_run_spec(quick_config, "snt1-I")
+    write_mesh(build_mesh(spec["scene"]), tmp / "mesh.xdmf")
+    history = pd.DataFrame(run_fem(spec, tmp / "mesh.xdmf", tmp / "fem", progress=False))
+    return spec, tmp, history
+
+
+def _ifenn(fem_run, quick_config, name, **options):
+    spec, tmp, _ = fem_run
+    spec = copy.deepcopy(spec)
+    spec.update({k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, name=name, **options)
+    return pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", tmp / "fem", None, tmp / name, progress=False))
+
+
+def _l2(a, b):
+    return np.linalg.norm(a - b) / np.linalg.norm(b)
+
+
+def test_exact_pixel_solver_tracks_fem(fem_run, quick_config):
+    """Zero-flux pixel Laplacian, no smoothing: force curve within 1 % (L2) of FEM, the
+    specimen is cut (final force within 10 % of FEM's, as a fraction of the peak)."""
+    _, _, fem = fem_run
+    hybrid = _ifenn(fem_run, quick_config, "exact", predictor="exact_pixel", smoothing_sigma=None, pixel_padding="replicate")
+    switch = int(fem.increment[fem.phi_max > quick_config["ifenn"]["switch_phi_max"]].iloc[0])
+    assert list(hybrid.hybrid_active) == [0] * switch + [1] * (len(fem) - switch)
+    # pre-switch rows are FEM's, copied, not recomputed
+    pd.testing.assert_frame_equal(hybrid.iloc[:switch][fem.columns], fem.iloc[:switch], check_dtype=False)
+    assert (hybrid.t_inference_s.iloc[switch:] > 0).all() and (hybrid.t_inference_s.iloc[:switch] == 0).all()
+    assert _l2(hybrid.reaction_force, fem.reaction_force) < 0.01
+    peak = fem.reaction_force.max()
+    assert abs(hybrid.reaction_force.iloc[-1] - fem.reaction_force.iloc[-1]) < 0.1 * peak
+
+
+def test_zero_padding_and_smoothing_leave_residual_force(fem_run, quick_config):
+    """The released script's zero padding acts like phi = 0 outside the image, and the
+    Gaussian smoothing lowers phi_max: both keep load on a specimen FEM has cut."""
+    _, _, fem = fem_run
+    final_fem = fem.reaction_force.iloc[-1]
+    zeros = _ifenn(fem_run, quick_config, "zeros", predictor="exact_pixel", smoothing_sigma=None, pixel_padding="zeros")
+    smooth = _ifenn(fem_run, quick_config, "smooth", predictor="exact_pixel", smoothing_sigma=2.0, pixel_padding="replicate")
+    assert zeros.reaction_force.iloc[-1] > 1.5 * final_fem
+    assert smooth.reaction_force.iloc[-1] > 1.5 * final_fem
+    assert smooth.phi_max.iloc[-1] < zeros.phi_max.iloc[-1]
