@@ -14,6 +14,7 @@ configfile: os.path.join(workflow.basedir, "config", "config.yaml")
 include: "workflow/rules/common.smk"
 include: "workflow/rules/mesh.smk"
 include: "workflow/rules/fem.smk"
+include: "workflow/rules/training.smk"
 
 
 rule all:
@@ -21,3 +22,6 @@ rule all:
         expand("results/mesh/{scene}.png", scene=config["scenes"]),
         expand("results/fem/{run}/history.csv", run=config["fem_runs"]),
         expand("results/figures/fem/{run}_force_displacement.png", run=config["fem_runs"]),
+        "results/figures/training/training_data.png",
+        "results/figures/training/training.png",
+        "results/picnn/scores.csv",

@@ -142,6 +142,21 @@ def _semantic_problems(config: dict) -> list[str]:
         bad = [i for i in run.get("save_fields", []) if i > n_inc]
         if bad:
             problems.append(f"config key '{key}.save_fields': increments {bad} exceed the schedule's {n_inc} increments (allowed 1..{n_inc})")
+    picnn = config["picnn"]
+    if picnn["training_run"] not in config["fem_runs"]:
+        problems.append(f"config key 'picnn.training_run': '{picnn['training_run']}' is not a FEM run; allowed: {sorted(config['fem_runs'])}")
+    else:
+        run = config["fem_runs"][picnn["training_run"]]
+        n_inc = sum(seg["increments"] for seg in config["schedules"].get(run["schedule"], []))
+        bad = [i for i in picnn["training_increments"] if i > n_inc]
+        if bad:
+            problems.append(f"config key 'picnn.training_increments': {bad} exceed the {n_inc} increments of run '{picnn['training_run']}' (allowed 1..{n_inc})")
+    try:
+        from .training import resolve_settings
+
+        resolve_settings({"preset": picnn["preset"], **picnn["settings"]})
+    except (KeyError, ImportError) as error:
+        problems.append(f"config key 'picnn.settings': {error}")
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:
             problems.append(
@@ -160,6 +175,11 @@ def load_values(schedule: list[dict]) -> list[float]:
     return values
 
 
+def training_spec(config: dict) -> dict:
+    """What the training rules need: the PICNN section, material and the training run."""
+    return {**config["picnn"], "material": config["material"]}
+
+
 def fem_run_spec(config: dict, run: str) -> dict:
     """Everything one FEM run needs, resolved and self-contained (JSON-serialisable)."""
     if run not in config["fem_runs"]:
@@ -167,6 +187,9 @@ def fem_run_spec(config: dict, run: str) -> dict:
     entry = config["fem_runs"][run]
     solver = config["solver"]
     preset = entry.get("linear_solvers", solver["linear_solvers"])
+    save = set(entry.get("save_fields", []))
+    if run == config["picnn"]["training_run"]:
+        save |= set(config["picnn"]["training_increments"])
     return {
         "name": run,
         "scene_name": entry["scene"],
@@ -179,7 +202,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
         "linear_solvers": preset,
         "petsc": solver["linear_solver_presets"][preset],
         "checkpoint_every": solver["checkpoint_every"],
-        "save_fields": sorted(set(entry.get("save_fields", []))),
+        "save_fields": sorted(save),
         "switch_phi_max": config["ifenn"]["switch_phi_max"],
         "mpi_ranks": entry.get("mpi_ranks", 1),
     }

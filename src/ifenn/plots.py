@@ -84,3 +84,83 @@ def force_displacement_figure(curves: dict, path, title: str = "", u_max: float 
     ax.grid(alpha=0.3)
     ax.legend()
     _save(fig, path)
+
+
+def _gauss_point_coordinates(data: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Coordinates (mm) of the Gauss point behind each pixel: in element (i, j) of size
+    h = 2 h_px the 2x2 points sit at (i + 1/2 -+ 1/(2 sqrt 3)) h, the lower one in the even pixel."""
+    h = 2.0 * float(data["h_px"])
+    offset = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
+    x = float(data["x0"]) + (np.arange(int(data["nx_px"])) // 2 + offset[np.arange(int(data["nx_px"])) % 2]) * h
+    y = float(data["y0"]) + (np.arange(int(data["ny_px"])) // 2 + offset[np.arange(int(data["ny_px"])) % 2]) * h
+    return np.meshgrid(x, y)
+
+
+def _extent(data: dict) -> list[float]:
+    x0, y0, h = float(data["x0"]), float(data["y0"]), float(data["h_px"])
+    return [x0, x0 + int(data["nx_px"]) * h, y0, y0 + int(data["ny_px"]) * h]
+
+
+def training_data_figure(data: dict, path, zoom_half_width_px: int = 40) -> None:
+    """H at the Gauss points (scatter, zoomed on the crack tip) beside the pixel map (whole
+    image), one row per training increment; log colour scale shared per row."""
+    from matplotlib.colors import LogNorm
+
+    gx, gy = _gauss_point_coordinates(data)
+    n = len(data["increment"])
+    fig, axes = plt.subplots(n, 2, figsize=(12, 5 * n), squeeze=False, gridspec_kw={"wspace": 0.35})
+    for k in range(n):
+        history = np.maximum(data["history"][k], 1e-3)
+        norm = LogNorm(vmin=max(history.min(), 1e-2), vmax=history.max())
+        # zoom on the crack tip: the cracked pixel (phi > 0.5) farthest from the domain boundary
+        phi = data["phase_field_gp"][k]
+        ny, nx = phi.shape
+        jj, ii = np.mgrid[0:ny, 0:nx]
+        depth = np.minimum.reduce([ii, nx - 1 - ii, jj, ny - 1 - jj])
+        iy, ix = np.unravel_index(np.argmax(np.where(phi > 0.5, depth, -1)), phi.shape)
+        rows = slice(max(iy - zoom_half_width_px, 0), iy + zoom_half_width_px)
+        cols = slice(max(ix - zoom_half_width_px, 0), ix + zoom_half_width_px)
+        ax = axes[k, 0]
+        sc = ax.scatter(gx[rows, cols], gy[rows, cols], c=history[rows, cols], s=4, norm=norm, cmap="inferno")
+        ax.set_aspect("equal")
+        ax.set_title(f"increment {int(data['increment'][k])}, u = {float(data['u'][k]):.4g} mm\nH at the Gauss points near the crack tip")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+        fig.colorbar(sc, ax=ax, label="H (N/mm$^2$)")
+        ax = axes[k, 1]
+        im = ax.imshow(history, origin="lower", extent=_extent(data), norm=norm, cmap="inferno", interpolation="nearest")
+        ax.set_title(f"pixel map {history.shape[1]} x {history.shape[0]}\nh_px = {float(data['h_px']):.4g} mm")
+        ax.add_patch(plt.Rectangle((gx[rows, cols].min(), gy[rows, cols].min()), np.ptp(gx[rows, cols]), np.ptp(gy[rows, cols]),
+                                   fill=False, edgecolor="cyan", lw=1))
+        ax.set_xlabel("x (mm)")
+        fig.colorbar(im, ax=ax, label="H (N/mm$^2$)")
+    _save(fig, path)
+
+
+def training_figure(data: dict, model, loss, path) -> None:
+    """Loss per epoch, then per training increment: FEM phi, PICNN phi (no smoothing), |error|."""
+    n = len(data["increment"])
+    fig = plt.figure(figsize=(13, 3.2 + 3.8 * n))
+    grid = fig.add_gridspec(n + 1, 3, height_ratios=[0.8] + [1.0] * n)
+    ax = fig.add_subplot(grid[0, :])
+    for stage, part in loss.groupby("stage", sort=False):
+        ax.semilogy(part["epoch"], part["loss"], lw=0.8, label=f"{stage}")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("physics loss ||R||$_2$")
+    ax.set_title(f"training: {len(loss)} epochs, {float(loss['wall_s'].iloc[-1]):.0f} s")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    for k in range(n):
+        reference = data["phase_field_gp"][k]
+        predicted = model.predict(data["history"][k])
+        error = np.abs(predicted - reference)
+        panels = [(reference, "FEM phi (Gauss points)", "viridis", (0, 1)),
+                  (predicted, "PICNN phi (no smoothing)", "viridis", (0, 1)),
+                  (error, f"|error|: mean {error.mean():.4f}, max {error.max():.3f}", "magma", (0, max(error.max(), 1e-6)))]
+        for col, (image, title, cmap, (lo, hi)) in enumerate(panels):
+            ax = fig.add_subplot(grid[k + 1, col])
+            im = ax.imshow(image, origin="lower", extent=_extent(data), cmap=cmap, vmin=lo, vmax=hi)
+            ax.set_title(f"inc {int(data['increment'][k])}: {title}", fontsize=9)
+            fig.colorbar(im, ax=ax, fraction=0.046)
+    fig.tight_layout()
+    _save(fig, path)

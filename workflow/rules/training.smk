@@ -1,0 +1,60 @@
+# The PICNN: training data from one FEM run, training with the physics loss, figures.
+
+
+rule training_data:
+    input:
+        fields=lambda w: f"results/fem/{config['picnn']['training_run']}/fields.h5",
+    output:
+        "results/training/data.h5",
+    params:
+        increments=lambda w: config["picnn"]["training_increments"],
+    log:
+        "logs/training/data.log",
+    script:
+        "../scripts/training_data.py"
+
+
+rule train_picnn:
+    input:
+        data="results/training/data.h5",
+    output:
+        model="results/picnn/model.pt",
+        loss="results/picnn/loss.csv",
+        scores="results/picnn/scores.csv",
+        provenance="results/picnn/provenance.json",
+    params:
+        spec=lambda w: json.dumps(training_spec(config), sort_keys=True),
+    threads: lambda w: config["picnn"]["threads"]
+    resources:
+        mem_mb=4000,
+        runtime=120,
+    log:
+        "logs/training/train.log",
+    benchmark:
+        "benchmarks/training/train.tsv"
+    script:
+        "../scripts/train_picnn.py"
+
+
+rule training_data_figure:
+    input:
+        "results/training/data.h5",
+    output:
+        report("results/figures/training/training_data.png", caption="../report/training_data.rst", category="PICNN training"),
+    log:
+        "logs/figures/training_data.log",
+    script:
+        "../scripts/training_data_figure.py"
+
+
+rule training_figure:
+    input:
+        data="results/training/data.h5",
+        model="results/picnn/model.pt",
+        loss="results/picnn/loss.csv",
+    output:
+        report("results/figures/training/training.png", caption="../report/training.rst", category="PICNN training"),
+    log:
+        "logs/figures/training.log",
+    script:
+        "../scripts/training_figure.py"

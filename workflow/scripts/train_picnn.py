@@ -1,0 +1,30 @@
+"""Adapter: training data -> ifenn.training.train_picnn -> model, loss log, score table."""
+import json
+import time
+
+import pandas as pd
+
+from ifenn.config import spec_hash
+from ifenn.io import provenance, write_csv, write_json
+from ifenn.picnn import save_picnn
+from ifenn.training import resolve_settings, score_picnn, train_picnn
+from ifenn.training_data import read_training_data
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+spec = json.loads(snakemake.params.spec)
+data = read_training_data(snakemake.input.data)
+settings = resolve_settings({"preset": spec["preset"], **spec["settings"]})
+material = spec["material"]
+started = time.perf_counter()
+model, loss = train_picnn(list(data["history"]), float(data["h_px"]), material["Gc"], material["lc"], settings,
+                          seed=spec["seed"], threads=snakemake.threads, progress=True)
+wall = time.perf_counter() - started
+save_picnn(model, snakemake.output.model, float(data["h_px"]), material["Gc"], material["lc"], spec_hash(spec),
+           extra={"settings": settings, "training_increments": data["increment"].tolist()})
+scores = pd.DataFrame(score_picnn(model, list(data["history"]), list(data["phase_field_gp"])))
+scores.insert(0, "increment", data["increment"])
+scores.insert(1, "u", data["u"])
+scores["training_wall_s"] = wall
+write_csv(snakemake.output.loss, loss)
+write_csv(snakemake.output.scores, scores)
+write_json(snakemake.output.provenance, provenance(spec_hash(spec), wall, threads=snakemake.threads, settings=settings))

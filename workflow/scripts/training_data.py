@@ -1,0 +1,5 @@
+"""Adapter: FEM fields.h5 -> ifenn.training_data.extract_training_data."""
+from ifenn.training_data import extract_training_data
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+extract_training_data(snakemake.input.fields, snakemake.params.increments, snakemake.output[0])
