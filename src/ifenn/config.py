@@ -187,7 +187,8 @@ def fem_run_spec(config: dict, run: str) -> dict:
     entry = config["fem_runs"][run]
     solver = config["solver"]
     preset = entry.get("linear_solvers", solver["linear_solvers"])
-    save = set(entry.get("save_fields", []))
+    n_inc = sum(seg["increments"] for seg in config["schedules"][entry["schedule"]])
+    save = set(entry.get("save_fields", [])) | set(range(solver["save_every"], n_inc + 1, solver["save_every"]))
     if run == config["picnn"]["training_run"]:
         save |= set(config["picnn"]["training_increments"])
     return {
