@@ -15,6 +15,8 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/mesh.smk"
 include: "workflow/rules/fem.smk"
 include: "workflow/rules/training.smk"
+include: "workflow/rules/ifenn.smk"
+include: "workflow/rules/metrics.smk"
 
 
 rule all:
@@ -25,3 +27,6 @@ rule all:
         "results/figures/training/training_data.png",
         "results/figures/training/training.png",
         "results/picnn/scores.csv",
+        expand("results/figures/ifenn/{run}_force_displacement.png", run=config["ifenn_runs"]),
+        "results/tables/accuracy.csv",
+        "results/tables/timing.csv",

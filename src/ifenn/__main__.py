@@ -1,5 +1,8 @@
-"""Command line: ``python -m ifenn fem --spec SPEC.json --mesh MESH.xdmf --out DIR``
-(run it under ``mpirun -n N`` for N ranks), ``python -m ifenn mesh --config ... --scene S``."""
+"""Command line (run under ``mpirun -n N`` for N ranks):
+
+  python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
+  python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf --fem-dir FEM_RUN_DIR [--model MODEL.pt] --out DIR
+"""
 
 from __future__ import annotations
 
@@ -17,6 +20,13 @@ def main(argv=None) -> int:
     fem.add_argument("--mesh", required=True, help="mesh XDMF written by the mesh rule")
     fem.add_argument("--out", required=True, help="output directory")
     fem.add_argument("--no-progress", action="store_true")
+    hybrid = sub.add_parser("ifenn", help="continue a FEM run from its switch-over increment with IFENN")
+    hybrid.add_argument("--spec", required=True, help="resolved IFENN run spec (JSON, from config.ifenn_run_spec)")
+    hybrid.add_argument("--mesh", required=True)
+    hybrid.add_argument("--fem-dir", required=True, help="output directory of the FEM run it continues")
+    hybrid.add_argument("--model", default=None, help="trained PICNN (needed when the predictor is 'picnn')")
+    hybrid.add_argument("--out", required=True)
+    hybrid.add_argument("--no-progress", action="store_true")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):
@@ -27,6 +37,12 @@ def main(argv=None) -> int:
         with open(args.spec) as stream:
             spec = json.load(stream)
         run_fem(spec, args.mesh, args.out, progress=not args.no_progress)
+    elif args.command == "ifenn":
+        from .hybrid import run_ifenn
+
+        with open(args.spec) as stream:
+            spec = json.load(stream)
+        run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
     return 0
 
 

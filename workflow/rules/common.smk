@@ -2,7 +2,7 @@
 import json
 import sys
 
-from ifenn.config import ConfigError, fem_run_spec, training_spec, validate_config
+from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
 
 try:
     _validated = validate_config(config)

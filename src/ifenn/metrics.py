@@ -1,0 +1,91 @@
+"""Accuracy of an IFENN run against the FEM run it continues, and per-step timings.
+
+All field metrics use the Gauss-point phase field as pixel maps (both methods have it), so
+FEM and IFENN are measured with the same discrete operators.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+
+CRACK_PHI = 0.5
+
+
+def dissipated_energy(phase_field: np.ndarray, h_px: float, Gc: float, lc: float) -> float:
+    """Crack surface energy int Gc/(2 lc) (phi^2 + lc^2 |grad phi|^2) dA on a pixel map,
+    N mm per mm of thickness (central differences inside, one-sided at the edges)."""
+    grad_y, grad_x = np.gradient(phase_field, h_px)
+    density = Gc / (2.0 * lc) * (phase_field**2 + lc**2 * (grad_x**2 + grad_y**2))
+    return float(density.sum() * h_px**2)
+
+
+def crack_iou(phi_a: np.ndarray, phi_b: np.ndarray, threshold: float = CRACK_PHI) -> float:
+    """Intersection over union of the crack sets {phi >= threshold}; 1.0 when both are empty."""
+    a, b = phi_a >= threshold, phi_b >= threshold
+    union = np.logical_or(a, b).sum()
+    return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
+
+
+def _fields(path: Path) -> tuple[dict, dict]:
+    with h5py.File(path, "r") as h5:
+        maps = {int(g.split("_")[1]): (float(h5[g].attrs["u"]), h5[g]["phase_field_gp"][()]) for g in h5}
+        return maps, dict(h5.attrs)
+
+
+def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels: int = 3) -> dict:
+    """Force-curve and crack metrics of an IFENN run against its FEM run (same schedule)."""
+    fem = pd.read_csv(Path(fem_dir) / "history.csv")
+    ifenn = pd.read_csv(Path(ifenn_dir) / "history.csv")
+    common = min(len(fem), len(ifenn))
+    f_fem, f_ifenn = fem.reaction_force.to_numpy()[:common], ifenn.reaction_force.to_numpy()[:common]
+    peak_fem, peak_ifenn = int(np.argmax(f_fem)), int(np.argmax(f_ifenn))
+    switch = int(ifenn.increment[ifenn.hybrid_active == 1].min()) if (ifenn.hybrid_active == 1).any() else len(ifenn) + 1
+    row = {
+        "switch_increment": switch, "u_switch": float(ifenn.u[ifenn.increment == switch].iloc[0]) if switch <= len(ifenn) else np.nan,
+        "peak_force_fem": f_fem[peak_fem], "peak_force_ifenn": f_ifenn[peak_ifenn],
+        "peak_force_rel_error": (f_ifenn[peak_ifenn] - f_fem[peak_fem]) / f_fem[peak_fem],
+        "u_peak_fem": float(fem.u.iloc[peak_fem]), "u_peak_ifenn": float(ifenn.u.iloc[peak_ifenn]),
+        "force_l2_rel_error": float(np.linalg.norm(f_ifenn - f_fem) / np.linalg.norm(f_fem)),
+        "final_force_fraction_fem": f_fem[-1] / f_fem[peak_fem], "final_force_fraction_ifenn": f_ifenn[-1] / f_fem[peak_fem],
+    }
+    fem_maps, attrs = _fields(Path(fem_dir) / "fields.h5")
+    ifenn_maps, _ = _fields(Path(ifenn_dir) / "fields.h5")
+    h_px = float(attrs["h_px"])
+    last = max(set(fem_maps) & set(ifenn_maps))
+    row["dissipated_energy_fem"] = dissipated_energy(fem_maps[last][1], h_px, material["Gc"], material["lc"])
+    row["dissipated_energy_ifenn"] = dissipated_energy(ifenn_maps[last][1], h_px, material["Gc"], material["lc"])
+    row["dissipated_energy_rel_error"] = row["dissipated_energy_ifenn"] / row["dissipated_energy_fem"] - 1.0
+    after = sorted(i for i in set(fem_maps) & set(ifenn_maps) if i > switch)
+    picks = [after[int(round(k))] for k in np.linspace(0, len(after) - 1, levels)] if after else []
+    for k in range(levels):
+        if k < len(picks):
+            row[f"u_iou_{k + 1}"] = fem_maps[picks[k]][0]
+            row[f"crack_iou_{k + 1}"] = crack_iou(fem_maps[picks[k]][1], ifenn_maps[picks[k]][1])
+        else:
+            row[f"u_iou_{k + 1}"] = row[f"crack_iou_{k + 1}"] = np.nan
+    return row
+
+
+def timing(fem_history: pd.DataFrame, ifenn_history: pd.DataFrame) -> list[dict]:
+    """Mean seconds per increment of each step, FEM and IFENN, over the propagation stage
+    (the increments IFENN computed); cumulative phase-field time over that stage."""
+    hybrid = ifenn_history[ifenn_history.hybrid_active == 1]
+    stage = fem_history[fem_history.increment.isin(hybrid.increment)]
+    rows = []
+    for method, frame in (("fem", stage), ("ifenn", hybrid)):
+        rows.append({
+            "method": method, "increments": len(frame),
+            "t_displacement_s": frame.t_displacement_s.mean(), "t_phase_field_s": frame.t_phase_field_s.mean(),
+            "t_inference_s": frame.t_inference_s.mean() if "t_inference_s" in frame else 0.0,
+            "t_history_s": frame.t_history_s.mean(), "t_increment_s": frame.t_increment_s.mean(),
+            "phase_field_cumulative_s": frame.t_phase_field_s.sum(), "run_cumulative_s": frame.t_increment_s.sum(),
+        })
+    fem_row, ifenn_row = rows
+    for row in rows:
+        row["phase_field_time_vs_fem"] = row["t_phase_field_s"] / fem_row["t_phase_field_s"]
+        row["increment_time_vs_fem"] = row["t_increment_s"] / fem_row["t_increment_s"]
+    return rows

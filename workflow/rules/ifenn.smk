@@ -1,0 +1,68 @@
+# IFENN runs: each continues a FEM run from its switch-over increment with the PICNN (or the
+# exact pixel solver), then is compared with it.
+
+
+rule ifenn_spec:
+    output:
+        "results/ifenn/{run}/spec.json",
+    params:
+        spec=lambda w: json.dumps(ifenn_run_spec(config, w.run), sort_keys=True),
+    run:
+        from ifenn.io import write_json
+
+        write_json(output[0], json.loads(params.spec))
+
+
+def ifenn_inputs(wildcards):
+    entry = config["ifenn_runs"][wildcards.run]
+    fem_run = entry["fem_run"]
+    inputs = {
+        "spec": f"results/ifenn/{wildcards.run}/spec.json",
+        "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
+        "fem_fields": f"results/fem/{fem_run}/fields.h5",
+        "fem_history": f"results/fem/{fem_run}/history.csv",
+    }
+    if entry.get("predictor", config["ifenn"]["predictor"]) == "picnn":
+        inputs["model"] = "results/picnn/model.pt"
+    return inputs
+
+
+rule ifenn:
+    input:
+        unpack(ifenn_inputs),
+    output:
+        history="results/ifenn/{run}/history.csv",
+        fields="results/ifenn/{run}/fields.h5",
+        xdmf="results/ifenn/{run}/paraview.xdmf",
+        xdmf_h5="results/ifenn/{run}/paraview.h5",
+        provenance="results/ifenn/{run}/provenance.json",
+    params:
+        python=PYTHON,
+        model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
+        fem_dir=lambda w, input: os.path.dirname(input.fem_history),
+        out=lambda w, output: os.path.dirname(output.history),
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=240,
+    log:
+        "logs/ifenn/{run}.log",
+    benchmark:
+        "benchmarks/ifenn/{run}.tsv"
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn ifenn --spec {input.spec} --mesh {input.mesh}"
+        " --fem-dir {params.fem_dir} {params.model} --out {params.out} > {log} 2>&1"
+
+
+rule ifenn_force_figure:
+    input:
+        ifenn="results/ifenn/{run}/history.csv",
+        fem=lambda w: f"results/fem/{config['ifenn_runs'][w.run]['fem_run']}/history.csv",
+    output:
+        report("results/figures/ifenn/{run}_force_displacement.png", caption="../report/ifenn_force.rst", category="IFENN runs"),
+    params:
+        fem_run=lambda w: config["ifenn_runs"][w.run]["fem_run"],
+    log:
+        "logs/figures/ifenn_{run}.log",
+    script:
+        "../scripts/ifenn_force_figure.py"
