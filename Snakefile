@@ -17,6 +17,7 @@ include: "workflow/rules/fem.smk"
 include: "workflow/rules/training.smk"
 include: "workflow/rules/ifenn.smk"
 include: "workflow/rules/metrics.smk"
+include: "workflow/rules/figures.smk"
 
 
 rule all:
@@ -30,3 +31,7 @@ rule all:
         expand("results/figures/ifenn/{run}_force_displacement.png", run=config["ifenn_runs"]),
         "results/tables/accuracy.csv",
         "results/tables/timing.csv",
+        expand("results/figures/paper/{run}_comparison.png", run=config["figures"]["comparisons"]),
+        "results/figures/paper/views_3d.png",
+        "results/figures/paper/mesh_study.png",
+        "results/figures/paper/phase_field_time.png",

@@ -157,6 +157,13 @@ def _semantic_problems(config: dict) -> list[str]:
         resolve_settings({"preset": picnn["preset"], **picnn["settings"]})
     except (KeyError, ImportError) as error:
         problems.append(f"config key 'picnn.settings': {error}")
+    figures = config["figures"]
+    named = [(f"figures.comparisons.{r}", r) for r in figures["comparisons"]]
+    named += [("figures.views_3d.run", figures["views_3d"]["run"])]
+    named += [(f"figures.mesh_study.runs[{k}]", r) for k, r in enumerate(figures["mesh_study"]["runs"])]
+    for key, run in named:
+        if run not in config.get("ifenn_runs", {}):
+            problems.append(f"config key '{key}': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:
             problems.append(
@@ -191,6 +198,9 @@ def fem_run_spec(config: dict, run: str) -> dict:
     save = set(entry.get("save_fields", [])) | set(range(solver["save_every"], n_inc + 1, solver["save_every"]))
     if run == config["picnn"]["training_run"]:
         save |= set(config["picnn"]["training_increments"])
+    views = config.get("figures", {}).get("views_3d")
+    if views and config.get("ifenn_runs", {}).get(views["run"], {}).get("fem_run") == run:
+        save.add(views["increment"])
     return {
         "name": run,
         "scene_name": entry["scene"],

@@ -164,3 +164,150 @@ def training_figure(data: dict, model, loss, path) -> None:
             fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
     _save(fig, path)
+
+
+def read_phase_field_maps(fields_path) -> tuple[dict, dict]:
+    """{increment: (u, phase_field_gp map)} and the root attrs of a run's fields.h5."""
+    import h5py
+
+    with h5py.File(fields_path, "r") as h5:
+        maps = {int(g.split("_")[1]): (float(h5[g].attrs["u"]), h5[g]["phase_field_gp"][()]) for g in h5}
+        return maps, dict(h5.attrs)
+
+
+def _window(attrs: dict, zoom: dict | None):
+    """Row/column slices and extent (mm) of a zoom window {x: [a, b], y: [c, d]} of a pixel map."""
+    x0, y0, h = float(attrs["x0"]), float(attrs["y0"]), float(attrs["h_px"])
+    nx, ny = int(attrs["nx_px"]), int(attrs["ny_px"])
+    if not zoom:
+        return slice(0, ny), slice(0, nx), [x0, x0 + nx * h, y0, y0 + ny * h]
+    c0, c1 = (max(int(np.floor((v - x0) / h)), 0) for v in (zoom["x"][0], zoom["x"][1]))
+    r0, r1 = (max(int(np.floor((v - y0) / h)), 0) for v in (zoom["y"][0], zoom["y"][1]))
+    return slice(r0, r1), slice(c0, c1), [x0 + c0 * h, x0 + c1 * h, y0 + r0 * h, y0 + r1 * h]
+
+
+def comparison_levels(fem_maps: dict, ifenn_maps: dict, switch: int, count: int) -> list[int]:
+    """``count`` saved increments common to both runs, evenly spread from the switch-over on."""
+    common = sorted(i for i in set(fem_maps) & set(ifenn_maps) if i >= switch)
+    if not common:
+        return []
+    return sorted({common[int(round(k))] for k in np.linspace(0, len(common) - 1, count)})
+
+
+def comparison_figure(fem_history, ifenn_history, fem_fields, ifenn_fields, path, title: str,
+                      levels: int = 4, zoom: dict | None = None) -> None:
+    """Force curves of FEM and IFENN, then phase-field contours at ``levels`` load levels after
+    the switch-over: FEM (top row) and IFENN (bottom row), same colour scale."""
+    fem_maps, attrs = read_phase_field_maps(fem_fields)
+    ifenn_maps, _ = read_phase_field_maps(ifenn_fields)
+    switch = int(ifenn_history.increment[ifenn_history.hybrid_active == 1].min())
+    chosen = comparison_levels(fem_maps, ifenn_maps, switch, levels)
+    rows, cols, extent = _window(attrs, zoom)
+    ncol = max(len(chosen), 1)
+    aspect = (extent[3] - extent[2]) / (extent[1] - extent[0])
+    fig = plt.figure(figsize=(3.2 * ncol + 1, 3.6 + 2 * 3.2 * ncol * aspect / ncol + 0.6))
+    grid = fig.add_gridspec(3, ncol, height_ratios=[1.3, aspect * 1.1, aspect * 1.1])
+    ax = fig.add_subplot(grid[0, :])
+    ax.plot(fem_history.u, fem_history.reaction_force, label="FEM", lw=1.6)
+    ax.plot(ifenn_history.u, ifenn_history.reaction_force, "--", label="IFENN", lw=1.6)
+    ax.axvline(ifenn_history.u[ifenn_history.increment == switch].iloc[0], color="0.5", lw=0.8, ls=":", label="switch-over")
+    for k, increment in enumerate(chosen):
+        ax.axvline(fem_maps[increment][0], color="0.8", lw=0.6)
+        ax.text(fem_maps[increment][0], ax.get_ylim()[1] * 0.95, str(k + 1), ha="center", fontsize=8)
+    ax.set_xlabel("u (mm)")
+    ax.set_ylabel("reaction force (N/mm)")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    image = None
+    for k, increment in enumerate(chosen):
+        for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
+            ax = fig.add_subplot(grid[r + 1, k])
+            image = ax.imshow(maps[increment][1][rows, cols], origin="lower", extent=extent, cmap="jet", vmin=0, vmax=1)
+            ax.set_title(f"{k + 1}: {label}, u = {maps[increment][0]:.4g}", fontsize=8)
+            ax.tick_params(labelsize=7)
+    if image is not None:
+        fig.colorbar(image, ax=fig.axes[1:], shrink=0.8, label="phi (Gauss points)")
+    _save(fig, path)
+
+
+def views_3d_figure(fem_fields, ifenn_fields, increment: int, views: list, path, zoom: dict | None = None) -> None:
+    """phi at the Gauss points of one increment as 3D surfaces, FEM (top) and IFENN (bottom),
+    seen from each (azimuth, elevation) pair in ``views`` (degrees)."""
+    fem_maps, attrs = read_phase_field_maps(fem_fields)
+    ifenn_maps, _ = read_phase_field_maps(ifenn_fields)
+    rows, cols, extent = _window(attrs, zoom)
+    h = float(attrs["h_px"])
+    fig = plt.figure(figsize=(3.4 * len(views), 7))
+    for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
+        phi = maps[increment][1][rows, cols]
+        x = extent[0] + (np.arange(phi.shape[1]) + 0.5) * h
+        y = extent[2] + (np.arange(phi.shape[0]) + 0.5) * h
+        X, Y = np.meshgrid(x, y)
+        for c, (azimuth, elevation) in enumerate(views):
+            ax = fig.add_subplot(2, len(views), r * len(views) + c + 1, projection="3d")
+            ax.plot_surface(X, Y, phi, cmap="jet", vmin=0, vmax=1, linewidth=0, antialiased=False, rcount=120, ccount=120)
+            ax.view_init(elev=elevation, azim=azimuth)
+            ax.set_zlim(0, 1)
+            ax.set_title(f"{label}: az {azimuth}, el {elevation}", fontsize=8)
+            ax.tick_params(labelsize=6)
+    fig.suptitle(f"phi at the Gauss points, increment {increment} (u = {fem_maps[increment][0]:.4g} mm)")
+    _save(fig, path)
+
+
+def mesh_study_figure(cases: list[dict], path, u_max: float, zoom: dict | None = None) -> None:
+    """Force curves of FEM and IFENN for several meshes (cut at u_max), and zoomed phase-field
+    contours of each at the last saved increment with u <= u_max. ``cases``: dicts with keys
+    label, fem_history, ifenn_history, fem_fields, ifenn_fields."""
+    fig = plt.figure(figsize=(4 * len(cases), 9))
+    grid = fig.add_gridspec(3, len(cases), height_ratios=[1.4, 1, 1])
+    ax = fig.add_subplot(grid[0, :])
+    for k, case in enumerate(cases):
+        color = f"C{k}"
+        for frame, style, method in ((case["fem_history"], "-", "FEM"), (case["ifenn_history"], "--", "IFENN")):
+            frame = frame[frame.u <= u_max + 1e-15]
+            ax.plot(frame.u, frame.reaction_force, style, color=color, label=f"{case['label']} {method}", lw=1.3)
+    ax.set_xlabel("u (mm)")
+    ax.set_ylabel("reaction force (N/mm)")
+    ax.legend(fontsize=7, ncol=len(cases))
+    ax.grid(alpha=0.3)
+    for k, case in enumerate(cases):
+        fem_maps, attrs = read_phase_field_maps(case["fem_fields"])
+        ifenn_maps, _ = read_phase_field_maps(case["ifenn_fields"])
+        common = [i for i in set(fem_maps) & set(ifenn_maps) if fem_maps[i][0] <= u_max + 1e-15]
+        if not common:
+            continue
+        increment = max(common)
+        rows, cols, extent = _window(attrs, zoom)
+        for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
+            ax = fig.add_subplot(grid[r + 1, k])
+            image = ax.imshow(maps[increment][1][rows, cols], origin="lower", extent=extent, cmap="jet", vmin=0, vmax=1)
+            ax.set_title(f"{case['label']} {label}, u = {maps[increment][0]:.4g}", fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.colorbar(image, ax=fig.axes[1:], shrink=0.8, label="phi")
+    _save(fig, path)
+
+
+def phase_field_time_figure(timing, cases: list[dict], path) -> None:
+    """Phase-field time per increment (left) and cumulative over the propagation stage
+    (right) against lc/h, FEM and IFENN. ``timing``: the timing table; ``cases``: dicts with
+    run and lc_over_h."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    for method, marker in (("fem", "o-"), ("ifenn", "s--")):
+        xs, per_inc, cumulative = [], [], []
+        for case in cases:
+            row = timing[(timing.run == case["run"]) & (timing.method == method)]
+            if len(row):
+                xs.append(case["lc_over_h"])
+                per_inc.append(float(row.t_phase_field_s.iloc[0]))
+                cumulative.append(float(row.phase_field_cumulative_s.iloc[0]))
+        left.plot(xs, per_inc, marker, label=method.upper())
+        right.plot(xs, cumulative, marker, label=method.upper())
+    left.set_ylabel("phase-field step per increment (s)")
+    right.set_ylabel("phase-field time, propagation stage (s)")
+    for ax in (left, right):
+        ax.set_xlabel("lc / h")
+        ax.grid(alpha=0.3)
+        ax.legend()
+    fig.suptitle("phase-field cost on this machine's CPU (one core): IFENN = pixels + inference + smoothing + back-projection")
+    _save(fig, path)

@@ -20,6 +20,11 @@ def fem_spec_json(run):
     return json.dumps(fem_run_spec(config, run), sort_keys=True)
 
 
+def lc_over_h(fem_run):
+    scene = config["scenes"][config["fem_runs"][fem_run]["scene"]]
+    return config["material"]["lc"] / ((scene["domain"]["x"][1] - scene["domain"]["x"][0]) / scene["elements"][0])
+
+
 def fem_ranks(wildcards):
     return config["fem_runs"][wildcards.run].get("mpi_ranks", 1)
 

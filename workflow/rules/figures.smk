@@ -1,0 +1,61 @@
+# The paper's comparison figures, from the FEM and IFENN runs (config 'figures').
+
+
+def _pair(run):
+    fem_run = config["ifenn_runs"][run]["fem_run"]
+    return {"fem_history": f"results/fem/{fem_run}/history.csv", "fem_fields": f"results/fem/{fem_run}/fields.h5",
+            "ifenn_history": f"results/ifenn/{run}/history.csv", "ifenn_fields": f"results/ifenn/{run}/fields.h5"}
+
+
+rule comparison_figure:
+    input:
+        unpack(lambda w: _pair(w.run)),
+    output:
+        report("results/figures/paper/{run}_comparison.png", caption="../report/comparison.rst", category="Paper figures"),
+    params:
+        options=lambda w: config["figures"]["comparisons"][w.run],
+    log:
+        "logs/figures/comparison_{run}.log",
+    script:
+        "../scripts/comparison_figure.py"
+
+
+rule views_3d_figure:
+    input:
+        unpack(lambda w: _pair(config["figures"]["views_3d"]["run"])),
+    output:
+        report("results/figures/paper/views_3d.png", caption="../report/views_3d.rst", category="Paper figures"),
+    params:
+        options=config["figures"]["views_3d"],
+    log:
+        "logs/figures/views_3d.log",
+    script:
+        "../scripts/views_3d_figure.py"
+
+
+rule mesh_study_figure:
+    input:
+        pairs=lambda w: [path for run in config["figures"]["mesh_study"]["runs"] for path in _pair(run).values()],
+    output:
+        report("results/figures/paper/mesh_study.png", caption="../report/mesh_study.rst", category="Paper figures"),
+    params:
+        options=config["figures"]["mesh_study"],
+        pairs={run: _pair(run) for run in config["figures"]["mesh_study"]["runs"]},
+    log:
+        "logs/figures/mesh_study.log",
+    script:
+        "../scripts/mesh_study_figure.py"
+
+
+rule phase_field_time_figure:
+    input:
+        timing="results/tables/timing.csv",
+    output:
+        report("results/figures/paper/phase_field_time.png", caption="../report/phase_field_time.rst", category="Paper figures"),
+    params:
+        cases=[{"run": run, "lc_over_h": lc_over_h(config["ifenn_runs"][run]["fem_run"])}
+               for run in config["figures"]["mesh_study"]["runs"]],
+    log:
+        "logs/figures/phase_field_time.log",
+    script:
+        "../scripts/phase_field_time_figure.py"

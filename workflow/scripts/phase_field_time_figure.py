@@ -1,0 +1,7 @@
+"""Adapter: timing table -> ifenn.plots.phase_field_time_figure."""
+import pandas as pd
+
+from ifenn.plots import phase_field_time_figure
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+phase_field_time_figure(pd.read_csv(snakemake.input.timing), snakemake.params.cases, snakemake.output[0])
