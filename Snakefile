@@ -12,6 +12,16 @@ configfile: os.path.join(workflow.basedir, "config", "config.yaml")
 
 
 include: "workflow/rules/common.smk"
+
+
+# Rules that only write a small JSON run on the submitting host, not as cluster jobs.
+localrules:
+    all,
+    fem_spec,
+    ifenn_spec,
+
+
+
 include: "workflow/rules/mesh.smk"
 include: "workflow/rules/fem.smk"
 include: "workflow/rules/training.smk"

@@ -28,13 +28,43 @@ def quick_workflow(tmp_path_factory):
 
 
 def test_quick_profile_runs_end_to_end(quick_workflow):
+    results = quick_workflow / "results"
     for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
-        history = pd.read_csv(quick_workflow / "results" / "fem" / run / "history.csv")
+        history = pd.read_csv(results / "fem" / run / "history.csv")
         assert history.reaction_force.max() > 0
-        assert (quick_workflow / "results" / "figures" / "fem" / f"{run}_force_displacement.png").stat().st_size > 10_000
-        assert (quick_workflow / "results" / "fem" / run / "provenance.json").exists()
+        assert (results / "figures" / "fem" / f"{run}_force_displacement.png").stat().st_size > 10_000
+        assert (results / "fem" / run / "provenance.json").exists()
+        hybrid = pd.read_csv(results / "ifenn" / run / "history.csv")
+        assert len(hybrid) == len(history) and hybrid.hybrid_active.iloc[-1] == 1
     for scene in ("snt1", "snt2", "snt3", "sdnt", "adnt"):
-        assert (quick_workflow / "results" / "mesh" / f"{scene}.png").exists()
+        assert (results / "mesh" / f"{scene}.png").exists()
+    accuracy = pd.read_csv(results / "tables" / "accuracy.csv")
+    assert set(accuracy.run) >= {"snt1-I", "snt1-I-exact", "adnt"}
+    timing = pd.read_csv(results / "tables" / "timing.csv")
+    assert set(timing.method) == {"fem", "ifenn"}
+    for figure in ("training/training_data.png", "training/training.png", "paper/views_3d.png", "paper/mesh_study.png",
+                   "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png"):
+        assert (results / "figures" / figure).stat().st_size > 10_000, figure
+
+
+def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_workflow):
+    result = _snakemake("--directory", str(quick_workflow), "--configfile", str(REPO / "config" / "quick.yaml"),
+                        "--config", "ifenn={smoothing_sigma: 1.0}", "-n", "--cores", "1", "--quiet", "rules", "all",
+                        cwd=quick_workflow)
+    assert result.returncode == 0, result.stderr[-3000:]
+    text = result.stdout + result.stderr
+    rules = {line.split()[0] for line in text.splitlines() if line.strip() and line.split()[0].isidentifier() and len(line.split()) == 2}
+    assert {"ifenn", "ifenn_spec", "accuracy_table"} <= rules, text
+    assert not rules & {"fem", "fem_spec", "mesh", "train_picnn", "training_data"}, text
+
+
+def test_lint_and_slurm_profile_dry_run(tmp_path):
+    lint = _snakemake("--directory", str(tmp_path), "--lint", cwd=tmp_path)
+    assert "Congratulations" in lint.stdout + lint.stderr, lint.stdout[-3000:]
+    dry = _snakemake("--directory", str(tmp_path), "--configfile", str(REPO / "config" / "quick.yaml"),
+                     "--profile", str(REPO / "profiles" / "slurm"), "-n", "all", cwd=tmp_path)
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    assert "fem" in dry.stdout
 
 
 def test_rerun_has_nothing_to_do(quick_workflow):

@@ -32,3 +32,24 @@ def fem_ranks(wildcards):
 def fem_launcher(wildcards):
     ranks = fem_ranks(wildcards)
     return MPI_LAUNCHER.format(ranks=ranks) if ranks > 1 else ""
+
+
+def ifenn_inputs(wildcards):
+    entry = config["ifenn_runs"][wildcards.run]
+    fem_run = entry["fem_run"]
+    inputs = {
+        "spec": f"results/ifenn/{wildcards.run}/spec.json",
+        "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
+        "fem_fields": f"results/fem/{fem_run}/fields.h5",
+        "fem_history": f"results/fem/{fem_run}/history.csv",
+    }
+    if entry.get("predictor", config["ifenn"]["predictor"]) == "picnn":
+        inputs["model"] = "results/picnn/model.pt"
+    return inputs
+
+
+def ifenn_pair(run):
+    """Histories and fields of an IFENN run and of the FEM run it continues."""
+    fem_run = config["ifenn_runs"][run]["fem_run"]
+    return {"fem_history": f"results/fem/{fem_run}/history.csv", "fem_fields": f"results/fem/{fem_run}/fields.h5",
+            "ifenn_history": f"results/ifenn/{run}/history.csv", "ifenn_fields": f"results/ifenn/{run}/fields.h5"}

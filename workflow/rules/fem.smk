@@ -8,6 +8,10 @@ rule fem_spec:
         "results/fem/{run}/spec.json",
     params:
         spec=lambda w: fem_spec_json(w.run),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/fem/{run}_spec.log",
     run:
         from ifenn.io import write_json
 
@@ -34,6 +38,8 @@ rule fem:
         tasks=fem_ranks,
         mem_mb=4000,
         runtime=240,
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/fem/{run}.log",
     benchmark:
@@ -48,6 +54,8 @@ rule fem_force_figure:
         history="results/fem/{run}/history.csv",
     output:
         report("results/figures/fem/{run}_force_displacement.png", caption="../report/fem_force.rst", category="FEM reference runs"),
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/fem_{run}.log",
     script:

@@ -1,19 +1,15 @@
 # The paper's comparison figures, from the FEM and IFENN runs (config 'figures').
 
 
-def _pair(run):
-    fem_run = config["ifenn_runs"][run]["fem_run"]
-    return {"fem_history": f"results/fem/{fem_run}/history.csv", "fem_fields": f"results/fem/{fem_run}/fields.h5",
-            "ifenn_history": f"results/ifenn/{run}/history.csv", "ifenn_fields": f"results/ifenn/{run}/fields.h5"}
-
-
 rule comparison_figure:
     input:
-        unpack(lambda w: _pair(w.run)),
+        unpack(lambda w: ifenn_pair(w.run)),
     output:
         report("results/figures/paper/{run}_comparison.png", caption="../report/comparison.rst", category="Paper figures"),
     params:
         options=lambda w: config["figures"]["comparisons"][w.run],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/comparison_{run}.log",
     script:
@@ -22,11 +18,13 @@ rule comparison_figure:
 
 rule views_3d_figure:
     input:
-        unpack(lambda w: _pair(config["figures"]["views_3d"]["run"])),
+        unpack(lambda w: ifenn_pair(config["figures"]["views_3d"]["run"])),
     output:
         report("results/figures/paper/views_3d.png", caption="../report/views_3d.rst", category="Paper figures"),
     params:
         options=config["figures"]["views_3d"],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/views_3d.log",
     script:
@@ -35,12 +33,14 @@ rule views_3d_figure:
 
 rule mesh_study_figure:
     input:
-        pairs=lambda w: [path for run in config["figures"]["mesh_study"]["runs"] for path in _pair(run).values()],
+        pairs=lambda w: [path for run in config["figures"]["mesh_study"]["runs"] for path in ifenn_pair(run).values()],
     output:
         report("results/figures/paper/mesh_study.png", caption="../report/mesh_study.rst", category="Paper figures"),
     params:
         options=config["figures"]["mesh_study"],
-        pairs={run: _pair(run) for run in config["figures"]["mesh_study"]["runs"]},
+        pairs={run: ifenn_pair(run) for run in config["figures"]["mesh_study"]["runs"]},
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/mesh_study.log",
     script:
@@ -55,6 +55,8 @@ rule phase_field_time_figure:
     params:
         cases=[{"run": run, "lc_over_h": lc_over_h(config["ifenn_runs"][run]["fem_run"])}
                for run in config["figures"]["mesh_study"]["runs"]],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/phase_field_time.log",
     script:

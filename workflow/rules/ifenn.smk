@@ -7,24 +7,14 @@ rule ifenn_spec:
         "results/ifenn/{run}/spec.json",
     params:
         spec=lambda w: json.dumps(ifenn_run_spec(config, w.run), sort_keys=True),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/ifenn/{run}_spec.log",
     run:
         from ifenn.io import write_json
 
         write_json(output[0], json.loads(params.spec))
-
-
-def ifenn_inputs(wildcards):
-    entry = config["ifenn_runs"][wildcards.run]
-    fem_run = entry["fem_run"]
-    inputs = {
-        "spec": f"results/ifenn/{wildcards.run}/spec.json",
-        "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
-        "fem_fields": f"results/fem/{fem_run}/fields.h5",
-        "fem_history": f"results/fem/{fem_run}/history.csv",
-    }
-    if entry.get("predictor", config["ifenn"]["predictor"]) == "picnn":
-        inputs["model"] = "results/picnn/model.pt"
-    return inputs
 
 
 rule ifenn:
@@ -45,6 +35,8 @@ rule ifenn:
     resources:
         mem_mb=4000,
         runtime=240,
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/ifenn/{run}.log",
     benchmark:
@@ -62,6 +54,8 @@ rule ifenn_force_figure:
         report("results/figures/ifenn/{run}_force_displacement.png", caption="../report/ifenn_force.rst", category="IFENN runs"),
     params:
         fem_run=lambda w: config["ifenn_runs"][w.run]["fem_run"],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/ifenn_{run}.log",
     script:

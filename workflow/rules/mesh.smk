@@ -8,6 +8,8 @@ rule mesh:
         meta="results/mesh/{scene}.json",
     params:
         scene=lambda w: config["scenes"][w.scene],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/mesh/{scene}.log",
     script:
@@ -21,6 +23,8 @@ rule mesh_figure:
         report("results/mesh/{scene}.png", caption="../report/mesh.rst", category="Scenes"),
     params:
         scene=lambda w: config["scenes"][w.scene],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/mesh/{scene}_figure.log",
     script:

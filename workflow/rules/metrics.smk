@@ -10,6 +10,8 @@ rule accuracy_table:
     params:
         runs={name: run["fem_run"] for name, run in config["ifenn_runs"].items()},
         material=config["material"],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/tables/accuracy.log",
     script:
@@ -24,6 +26,8 @@ rule timing_table:
         report("results/tables/timing.csv", caption="../report/timing.rst", category="Tables"),
     params:
         runs={name: run["fem_run"] for name, run in config["ifenn_runs"].items()},
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/tables/timing.log",
     script:

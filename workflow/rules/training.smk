@@ -8,6 +8,8 @@ rule training_data:
         "results/training/data.h5",
     params:
         increments=lambda w: config["picnn"]["training_increments"],
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/training/data.log",
     script:
@@ -28,6 +30,8 @@ rule train_picnn:
     resources:
         mem_mb=4000,
         runtime=120,
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/training/train.log",
     benchmark:
@@ -41,6 +45,8 @@ rule training_data_figure:
         "results/training/data.h5",
     output:
         report("results/figures/training/training_data.png", caption="../report/training_data.rst", category="PICNN training"),
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/training_data.log",
     script:
@@ -54,6 +60,8 @@ rule training_figure:
         loss="results/picnn/loss.csv",
     output:
         report("results/figures/training/training.png", caption="../report/training.rst", category="PICNN training"),
+    conda:
+        "../envs/ifenn.yaml"
     log:
         "logs/figures/training.log",
     script:
