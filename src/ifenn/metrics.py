@@ -17,10 +17,11 @@ CRACK_PHI = 0.5
 
 def dissipated_energy(phase_field: np.ndarray, h_px: float, Gc: float, lc: float) -> float:
     """Crack surface energy int Gc/(2 lc) (phi^2 + lc^2 |grad phi|^2) dA on a pixel map,
-    N mm per mm of thickness (central differences inside, one-sided at the edges)."""
-    grad_y, grad_x = np.gradient(phase_field, h_px)
-    density = Gc / (2.0 * lc) * (phase_field**2 + lc**2 * (grad_x**2 + grad_y**2))
-    return float(density.sum() * h_px**2)
+    N mm per mm of thickness. The gradient term is summed over pixel faces ((delta phi / h)^2
+    h^2 per face): unlike centred differences it keeps the kink of phi on the crack line."""
+    bulk = (phase_field**2).sum() * h_px**2
+    faces = (np.diff(phase_field, axis=0) ** 2).sum() + (np.diff(phase_field, axis=1) ** 2).sum()
+    return float(Gc / (2.0 * lc) * bulk + 0.5 * Gc * lc * faces)
 
 
 def crack_iou(phi_a: np.ndarray, phi_b: np.ndarray, threshold: float = CRACK_PHI) -> float:

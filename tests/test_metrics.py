@@ -1,0 +1,42 @@
+"""Accuracy metrics: the crack energy of the analytic AT2 profile, IoU, timing ratios."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ifenn.metrics import crack_iou, dissipated_energy, timing
+
+
+@pytest.mark.parametrize("lc_over_h_px", [6, 12])
+def test_straight_at2_crack_dissipates_gc_per_unit_length(lc_over_h_px):
+    """phi = exp(-|y|/lc) across a crack of length L: int Gc/(2lc)(phi^2 + lc^2 phi'^2) = Gc L.
+    The crack line runs through pixel centres (an odd number of rows), so phi = 1 is sampled;
+    the sums are then geometric series that differ from Gc L by O((h/lc)^2)."""
+    Gc, lc = 2.7, 0.03
+    h_px = lc / lc_over_h_px
+    width = 0.6
+    rows = 2 * int(0.3 / h_px) + 1
+    y = (np.arange(rows) - rows // 2) * h_px
+    phi = np.repeat(np.exp(-np.abs(y) / lc)[:, None], int(width / h_px), axis=1)
+    assert dissipated_energy(phi, h_px, Gc, lc) == pytest.approx(Gc * width, rel=0.01)
+
+
+def test_crack_iou():
+    a = np.zeros((10, 10))
+    b = np.zeros((10, 10))
+    assert crack_iou(a, b) == 1.0
+    a[4, :6] = 1.0
+    b[4, :3] = 1.0
+    assert crack_iou(a, b) == pytest.approx(0.5)
+    assert crack_iou(a, np.roll(a, 3, axis=0)) == 0.0
+
+
+def test_timing_compares_the_same_increments():
+    fem = pd.DataFrame({"increment": [1, 2, 3, 4], "t_displacement_s": 1.0, "t_phase_field_s": [9, 9, 1, 1.0],
+                        "t_history_s": 0.1, "t_increment_s": [10, 10, 2.1, 2.1]})
+    ifenn = fem.assign(t_phase_field_s=[9, 9, 3, 3.0], t_increment_s=[10, 10, 4.1, 4.1], t_inference_s=[0, 0, 2.5, 2.5],
+                       hybrid_active=[0, 0, 1, 1])
+    rows = {r["method"]: r for r in timing(fem, ifenn)}
+    assert rows["fem"]["increments"] == rows["ifenn"]["increments"] == 2
+    assert rows["ifenn"]["phase_field_time_vs_fem"] == pytest.approx(3.0)
+    assert rows["fem"]["phase_field_cumulative_s"] == pytest.approx(2.0)
