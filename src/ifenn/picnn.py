@@ -1,0 +1,462 @@
+"""Physics-informed CNN (PICNN) for the phase field: network, pixel physics, exact pixel solver.
+
+Conventions (SPEC sections 2 and 4):
+
+* A pixel map is a float array of shape ``(ny_px, nx_px)``; row ``iy`` increases with y
+  (row 0 is the bottom of the domain), column ``ix`` increases with x. Batches of maps have
+  shape ``(n_maps, ny_px, nx_px)``; torch tensors used inside the network have shape
+  ``(n_maps, 1, ny_px, nx_px)``.
+* Units: N and mm. ``history`` H is in N/mm^2, ``Gc`` in N/mm, ``lc`` and ``h_px`` in mm;
+  the phase field ``phi`` is dimensionless in [0, 1].
+* The pixel phase-field equation, at every pixel,
+
+      R = (Gc/lc) phi - Gc lc Lap(phi) - 2 (1 - phi) H = 0,
+      Lap(phi) = (K9*(phi) - 3 phi) / h_px^2,
+      K9* = [[1/4, 1/2, 1/4], [1/2, 0, 1/2], [1/4, 1/2, 1/4]],
+
+  with either zero padding of phi outside the image (the authors' released script: phi = 0
+  beyond the boundary) or replicate padding (a zero-flux boundary, as in the FEM).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from pathlib import Path
+
+import numpy as np
+import scipy.ndimage
+import scipy.sparse
+import scipy.sparse.linalg
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ifenn.io import atomic_path
+
+#: Laplacian stencil K9* of the paper (section "PICNN training"); its weights sum to 3.
+LAPLACIAN_K9_STAR = np.array([[0.25, 0.5, 0.25], [0.5, 0.0, 0.5], [0.25, 0.5, 0.25]])
+#: Weight of the centre pixel in Lap(phi) * h_px^2 (= -sum of K9*).
+LAPLACIAN_CENTRE_WEIGHT = -3.0
+
+#: Padding modes understood by the network and the Laplacian. "zeros": values beyond the
+#: image are 0; "replicate": the edge value is repeated (zero flux for the Laplacian).
+PADDING_MODES = ("zeros", "replicate", "reflect", "circular")
+
+
+# ---------------------------------------------------------------------------------------
+# Padding helper
+# ---------------------------------------------------------------------------------------
+def _pad(field: torch.Tensor, radius: int, padding: str) -> torch.Tensor:
+    """Pad the last two dimensions of ``field`` (n, c, ny, nx) by ``radius`` pixels."""
+    if padding not in PADDING_MODES:
+        raise ValueError(f"padding must be one of {PADDING_MODES}, got {padding!r}")
+    if radius == 0:
+        return field
+    mode = "constant" if padding == "zeros" else padding
+    return F.pad(field, (radius, radius, radius, radius), mode=mode)
+
+
+# ---------------------------------------------------------------------------------------
+# Symmetric convolution
+# ---------------------------------------------------------------------------------------
+def symmetric_kernel_index(kernel_size: int) -> tuple[np.ndarray, int]:
+    """Index map of a kernel invariant under the 8 symmetries of the square.
+
+    Entry (i, j) of a ``kernel_size`` x ``kernel_size`` kernel depends only on the
+    unordered pair (|di|, |dj|) of its offsets from the centre.
+
+    Returns
+    -------
+    index : (kernel_size, kernel_size) int array, entries in [0, n_free)
+    n_free : number of free values per kernel, (r + 1)(r + 2)/2 with r = kernel_size // 2
+        (6 for a 5x5 kernel).
+    """
+    if kernel_size % 2 != 1:
+        raise ValueError(f"kernel_size must be odd, got {kernel_size}")
+    radius = kernel_size // 2
+    pairs = [(a, b) for a in range(radius + 1) for b in range(a, radius + 1)]
+    pair_index = {pair: k for k, pair in enumerate(pairs)}
+    offsets = np.abs(np.arange(kernel_size) - radius)
+    index = np.empty((kernel_size, kernel_size), dtype=np.int64)
+    for i, di in enumerate(offsets):
+        for j, dj in enumerate(offsets):
+            index[i, j] = pair_index[(min(di, dj), max(di, dj))]
+    return index, len(pairs)
+
+
+class SymmetricConv2d(nn.Module):
+    """2-D convolution without bias whose kernels are invariant under the dihedral group D4.
+
+    Each (out, in) kernel has ``n_free`` learnable values (6 for 5x5), gathered into the
+    full kernel on every forward pass, so the layer commutes with 90-degree rotations and
+    mirror images of its input. "Same" padding: output size = input size.
+
+    Parameters
+    ----------
+    in_ch, out_ch : numbers of input and output channels.
+    kernel_size : odd kernel size (default 5).
+    padding : one of ``PADDING_MODES`` (default "zeros").
+    init_gain : the free values are drawn from U(-b, b), b = init_gain * sqrt(6 / (fan_in +
+        fan_out)) with fan = channels * kernel_size^2 (Glorot for tanh; default 1).
+    """
+
+    def __init__(
+        self,
+        in_ch: int,
+        out_ch: int,
+        kernel_size: int = 5,
+        padding: str = "zeros",
+        init_gain: float = 1.0,
+    ):
+        super().__init__()
+        if padding not in PADDING_MODES:
+            raise ValueError(f"padding must be one of {PADDING_MODES}, got {padding!r}")
+        index, n_free = symmetric_kernel_index(kernel_size)
+        self.in_ch, self.out_ch, self.kernel_size, self.padding = in_ch, out_ch, kernel_size, padding
+        self.register_buffer("kernel_index", torch.as_tensor(index.reshape(-1)), persistent=False)
+        bound = init_gain * np.sqrt(6.0 / ((in_ch + out_ch) * kernel_size**2))
+        self.free_weight = nn.Parameter(torch.empty(out_ch, in_ch, n_free).uniform_(-bound, bound))
+
+    def kernel(self) -> torch.Tensor:
+        """Full kernel, shape (out_ch, in_ch, kernel_size, kernel_size)."""
+        k = self.kernel_size
+        return self.free_weight[:, :, self.kernel_index].reshape(self.out_ch, self.in_ch, k, k)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """x: (n, in_ch, ny, nx) -> (n, out_ch, ny, nx)."""
+        radius = self.kernel_size // 2
+        if self.padding == "zeros":
+            return F.conv2d(x, self.kernel(), padding=radius)
+        return F.conv2d(_pad(x, radius, self.padding), self.kernel())
+
+
+# ---------------------------------------------------------------------------------------
+# Input scaling
+# ---------------------------------------------------------------------------------------
+INPUT_SCALING_KINDS = ("none", "linear", "log1p", "log")
+
+
+@dataclasses.dataclass(frozen=True)
+class InputScaling:
+    """Map from the capped history H_c = clamp(H, 0, H_cap) (N/mm^2) to the network input x.
+
+    kind
+        "none": x = H_c (the authors' script);
+        "linear": x = H_c / reference;
+        "log1p": x = log(1 + H_c / reference);
+        "log": x = log((H_c + reference) / (centre + reference)).
+    reference
+        N/mm^2. For "log" the floor below which histories look alike (a small fraction of
+        the far-field history, e.g. 0.01 N/mm^2, so that the shielded region behind a
+        notch, H ~ 1e-5 to 1e-2, is told apart from the far field, H ~ 1 to 10).
+    centre
+        N/mm^2, "log" only: the history mapped to x = 0. With no biases x = 0 gives
+        phi = 1/2 exactly, so the natural centre is Gc / (2 lc), the history at which the
+        local solution 2H / (Gc/lc + 2H) is 1/2; H = 0 then maps to a large negative x
+        (phi near 0) instead of phi = 1/2 as with the other kinds.
+    """
+
+    kind: str = "none"
+    reference: float = 1.0
+    centre: float = 0.0
+
+    def __post_init__(self):
+        if self.kind not in INPUT_SCALING_KINDS:
+            raise ValueError(f"input scaling kind must be one of {INPUT_SCALING_KINDS}")
+        if self.reference <= 0 or self.centre < 0:
+            raise ValueError("input scaling reference must be positive and centre non-negative")
+
+    def __call__(self, capped_history: torch.Tensor) -> torch.Tensor:
+        if self.kind == "none":
+            return capped_history
+        if self.kind == "linear":
+            return capped_history / self.reference
+        if self.kind == "log1p":
+            return torch.log1p(capped_history / self.reference)
+        return torch.log((capped_history + self.reference) / (self.centre + self.reference))
+
+
+# ---------------------------------------------------------------------------------------
+# The network
+# ---------------------------------------------------------------------------------------
+DEFAULT_CHANNELS = (1, 24, 24, 24, 1)
+#: History cap H_cap of the paper, N/mm^2 (the config is the source of truth; this is
+#: only the constructor default).
+DEFAULT_HISTORY_CAP = 5.0e4
+
+
+class PICNN(nn.Module):
+    """Fully convolutional PICNN: history pixels H -> phase-field pixels phi.
+
+    Layers: SymmetricConv2d for each consecutive channel pair, tanh after every layer but
+    the last, sigmoid after the last. No bias, normalisation, pooling or dense layer, so
+    any image size works and the whole map is equivariant to the 8 symmetries of the
+    square. Receptive field: 1 + (n_layers)(kernel_size - 1) pixels (17 for the default).
+
+    The input pre-processing (cap at ``history_cap``, then ``input_scaling``) lives in the
+    model and is applied by :meth:`phase_field`, the one path used by training and, via
+    :meth:`predict`, by inference.
+
+    Parameters
+    ----------
+    channels : channel counts, input first (default (1, 24, 24, 24, 1)).
+    kernel_size : odd kernel size (default 5).
+    padding : padding mode of every convolution (default "zeros").
+    history_cap : H_cap in N/mm^2 (default 5e4).
+    input_scaling : :class:`InputScaling` (default: unscaled, as in the authors' script).
+    init_gain : see :class:`SymmetricConv2d`.
+    """
+
+    def __init__(
+        self,
+        channels: tuple[int, ...] = DEFAULT_CHANNELS,
+        kernel_size: int = 5,
+        padding: str = "zeros",
+        history_cap: float = DEFAULT_HISTORY_CAP,
+        input_scaling: InputScaling | None = None,
+        init_gain: float = 1.0,
+    ):
+        super().__init__()
+        if channels[0] != 1 or channels[-1] != 1:
+            raise ValueError("the PICNN maps one channel (H) to one channel (phi)")
+        self.channels = tuple(int(c) for c in channels)
+        self.kernel_size = int(kernel_size)
+        self.padding = padding
+        self.history_cap = float(history_cap)
+        self.input_scaling = input_scaling if input_scaling is not None else InputScaling()
+        self.layers = nn.ModuleList(
+            SymmetricConv2d(c_in, c_out, kernel_size, padding, init_gain)
+            for c_in, c_out in zip(self.channels[:-1], self.channels[1:], strict=True)
+        )
+
+    @property
+    def receptive_radius(self) -> int:
+        """Pixels of context on each side that an output pixel depends on (8 for default)."""
+        return len(self.layers) * (self.kernel_size // 2)
+
+    def forward(self, network_input: torch.Tensor) -> torch.Tensor:
+        """Scaled input x (n, 1, ny, nx) -> phi (n, 1, ny, nx)."""
+        x = network_input
+        for layer in self.layers[:-1]:
+            x = torch.tanh(layer(x))
+        return torch.sigmoid(self.layers[-1](x))
+
+    def network_input(self, history: torch.Tensor) -> torch.Tensor:
+        """History H (N/mm^2, any shape) -> network input: scaling of clamp(H, 0, H_cap)."""
+        return self.input_scaling(torch.clamp(history, 0.0, self.history_cap))
+
+    def phase_field(self, history: torch.Tensor) -> torch.Tensor:
+        """History pixels H (n, 1, ny, nx), N/mm^2 -> phi (n, 1, ny, nx); differentiable."""
+        return self(self.network_input(history))
+
+    @torch.no_grad()
+    def predict(self, history_pixels: np.ndarray) -> np.ndarray:
+        """Inference: H pixel map(s) (ny, nx) or (n, ny, nx), N/mm^2 -> phi, same shape, float64."""
+        history_pixels = np.asarray(history_pixels)
+        batch = torch.as_tensor(history_pixels, dtype=self._dtype()).reshape(
+            -1, 1, *history_pixels.shape[-2:]
+        )
+        phi = self.phase_field(batch)
+        return phi.reshape(history_pixels.shape).double().numpy()
+
+    def _dtype(self) -> torch.dtype:
+        return self.layers[0].free_weight.dtype
+
+    def n_free_parameters(self) -> int:
+        """Number of trainable values (6 per 5x5 kernel)."""
+        return sum(p.numel() for p in self.parameters() if p.requires_grad)
+
+
+# ---------------------------------------------------------------------------------------
+# Pixel physics
+# ---------------------------------------------------------------------------------------
+def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros") -> torch.Tensor:
+    """Isotropic 9-point Laplacian (K9*(phi) - 3 phi) / h_px^2.
+
+    phi : (n, 1, ny, nx) tensor; h_px : pixel spacing in mm; padding : "zeros" (phi = 0
+    beyond the image, the released script) or "replicate" (zero flux).
+    Returns (n, 1, ny, nx), units 1/mm^2.
+    """
+    stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype).reshape(1, 1, 3, 3)
+    neighbours = F.conv2d(_pad(phi, 1, padding), stencil)
+    return (neighbours + LAPLACIAN_CENTRE_WEIGHT * phi) / h_px**2
+
+
+def residual(
+    phi: torch.Tensor,
+    history: torch.Tensor,
+    Gc: float,
+    lc: float,
+    h_px: float,
+    padding: str = "zeros",
+) -> torch.Tensor:
+    """Pixel residual R = (Gc/lc) phi - Gc lc Lap(phi) - 2 (1 - phi) H, N/mm^2.
+
+    phi, history : (n, 1, ny, nx) tensors (history in N/mm^2, already capped if wanted).
+    """
+    return (Gc / lc) * phi - Gc * lc * laplacian_9pt(phi, h_px, padding) - 2.0 * (1.0 - phi) * history
+
+
+def physics_loss(
+    phi: torch.Tensor,
+    history: torch.Tensor,
+    Gc: float,
+    lc: float,
+    h_px: float,
+    padding: str = "zeros",
+    pixel_weight: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """Loss L = ||R||_2 over all pixels of all images (the paper's eq. for L), N/mm^2.
+
+    ``pixel_weight`` (same shape as phi, optional) multiplies R^2 pixel by pixel before the
+    sum; training on crops uses it to mask the crop margins and to weight samples.
+    """
+    r = residual(phi, history, Gc, lc, h_px, padding)
+    squared = r**2 if pixel_weight is None else pixel_weight * r**2
+    return torch.sqrt(squared.sum())
+
+
+# ---------------------------------------------------------------------------------------
+# Exact solution of the pixel equation
+# ---------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=16)
+def laplacian_matrix(ny: int, nx: int, padding: str = "zeros") -> scipy.sparse.csc_matrix:
+    """Sparse K9* - 3 I on an (ny, nx) grid, row-major pixel numbering, without 1/h_px^2.
+
+    "zeros": neighbours beyond the image are dropped (phi = 0 there); "replicate": they
+    are folded back onto the nearest edge pixel (zero flux). Cached per shape and padding.
+    """
+    if padding not in ("zeros", "replicate"):
+        raise ValueError("the exact pixel solver supports padding 'zeros' or 'replicate'")
+    iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    rows, cols, vals = [], [], []
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            weight = LAPLACIAN_K9_STAR[dy + 1, dx + 1]
+            if weight == 0.0:
+                continue
+            jy, jx = iy + dy, ix + dx
+            if padding == "replicate":
+                jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
+                inside = np.ones_like(jy, dtype=bool)
+            else:
+                inside = (jy >= 0) & (jy < ny) & (jx >= 0) & (jx < nx)
+            rows.append((iy * nx + ix)[inside])
+            cols.append((jy * nx + jx)[inside])
+            vals.append(np.full(inside.sum(), weight))
+    n = ny * nx
+    neighbours = scipy.sparse.csc_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+    )
+    return (neighbours + LAPLACIAN_CENTRE_WEIGHT * scipy.sparse.identity(n, format="csc")).tocsc()
+
+
+def solve_pixel_equation(
+    history: np.ndarray,
+    Gc: float,
+    lc: float,
+    h_px: float,
+    padding: str = "zeros",
+    rtol: float = 1e-10,
+    maxiter: int = 2000,
+) -> np.ndarray:
+    """Exact phi of the pixel equation R(phi) = 0 for a history map (no network).
+
+    The equation is linear in phi: [(Gc/lc + 2H) I - (Gc lc / h_px^2) L] phi = 2H, with L
+    the cached K9* - 3 I matrix. The matrix is symmetric positive definite (diagonally
+    dominant), so it is solved with Jacobi-preconditioned conjugate gradients to relative
+    residual ``rtol`` (a few hundred iterations for a 400x400 map, well under a second).
+
+    history : (ny, nx) or (n, ny, nx) array, N/mm^2 (pass it capped if the network is).
+    Returns phi with the shape of ``history`` (float64).
+    """
+    history = np.asarray(history, dtype=np.float64)
+    if history.ndim == 3:
+        return np.stack([solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter) for h in history])
+    ny, nx = history.shape
+    h_flat = history.reshape(-1)
+    laplacian = laplacian_matrix(ny, nx, padding)
+    diffusion = Gc * lc / h_px**2
+    system = (scipy.sparse.diags(Gc / lc + 2.0 * h_flat) - diffusion * laplacian).tocsr()
+    rhs = 2.0 * h_flat
+    jacobi = 1.0 / system.diagonal()
+    preconditioner = scipy.sparse.linalg.LinearOperator(system.shape, matvec=lambda v: jacobi * v)
+    initial = rhs / (Gc / lc + 2.0 * h_flat)
+    phi, info = scipy.sparse.linalg.cg(system, rhs, x0=initial, rtol=rtol, atol=0.0, maxiter=maxiter, M=preconditioner)
+    if info != 0:
+        raise RuntimeError(f"pixel phase-field CG did not converge (info={info})")
+    return phi.reshape(ny, nx)
+
+
+# ---------------------------------------------------------------------------------------
+# Gaussian smoothing (IFENN step 3)
+# ---------------------------------------------------------------------------------------
+def gaussian_smoothing(
+    phi: np.ndarray, sigma: float = 2.0, truncate: float = 4.0, mode: str = "reflect"
+) -> np.ndarray:
+    """The released script's Gaussian filter: scipy.ndimage.gaussian_filter of each map.
+
+    phi : (ny, nx) or (n, ny, nx); sigma in pixels (default 2); truncate in sigmas (scipy's
+    default 4, radius 8 pixels for sigma 2); mode : scipy boundary mode (default "reflect",
+    scipy's default). Returns the smoothed maps, same shape.
+    """
+    phi = np.asarray(phi, dtype=np.float64)
+    per_axis_sigma = (0.0,) * (phi.ndim - 2) + (sigma, sigma)
+    return scipy.ndimage.gaussian_filter(phi, per_axis_sigma, truncate=truncate, mode=mode)
+
+
+# ---------------------------------------------------------------------------------------
+# Save / load
+# ---------------------------------------------------------------------------------------
+def save_picnn(
+    model: PICNN,
+    path: str | Path,
+    h_px: float,
+    Gc: float,
+    lc: float,
+    config_hash: str,
+    extra: dict | None = None,
+) -> None:
+    """Write the model and everything needed to rebuild and use it to one torch file.
+
+    Written to a temporary name, then renamed, so a half-written file never looks finished.
+    ``extra`` (optional, JSON-like) is stored as is, e.g. the training settings.
+    """
+    path = Path(path)
+    payload = {
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "channels": model.channels,
+        "kernel_size": model.kernel_size,
+        "padding": model.padding,
+        "history_cap": model.history_cap,
+        "input_scaling": dataclasses.asdict(model.input_scaling),
+        "h_px": float(h_px),
+        "Gc": float(Gc),
+        "lc": float(lc),
+        "config_hash": str(config_hash),
+        "extra": extra or {},
+    }
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def load_picnn(path: str | Path) -> tuple[PICNN, dict]:
+    """Read a file written by :func:`save_picnn`.
+
+    Returns (model in eval mode, metadata dict with h_px, Gc, lc, config_hash, extra, ...).
+    """
+    payload = torch.load(Path(path), map_location="cpu", weights_only=True)
+    model = PICNN(
+        channels=tuple(payload["channels"]),
+        kernel_size=payload["kernel_size"],
+        padding=payload["padding"],
+        history_cap=payload["history_cap"],
+        input_scaling=InputScaling(**payload["input_scaling"]),
+    )
+    state = payload["state_dict"]
+    model.to(dtype=state["layers.0.free_weight"].dtype)
+    model.load_state_dict(state)
+    model.eval()
+    metadata = {k: v for k, v in payload.items() if k != "state_dict"}
+    return model, metadata
