@@ -68,6 +68,14 @@ def test_network_is_local_with_receptive_radius_eight():
     assert np.abs(crop[0] - full[10, 5:45]).max() > 1e-6  # the crop edge does differ
 
 
+def test_log_input_scaling_centres_the_half_broken_history():
+    """x = log((H + ref) / (centre + ref)): 0 at H = centre = Gc/(2 lc), where 2H/(Gc/lc + 2H) = 1/2."""
+    scaling = InputScaling("log", reference=0.01, centre=GC / (2 * LC))
+    x = scaling(torch.tensor([0.0, GC / (2 * LC), 5.0e4], dtype=torch.float64))
+    assert x[1].item() == pytest.approx(0.0, abs=1e-12)
+    assert x[0].item() == pytest.approx(np.log(0.01 / 45.01)) and x[2].item() == pytest.approx(np.log(50000.01 / 45.01))
+
+
 def test_zero_input_gives_one_half():
     """No biases: H = 0 maps to phi = 0.5 exactly (SPEC 4), whatever the weights."""
     model = PICNN()
@@ -94,6 +102,21 @@ def test_exact_pixel_solution_has_near_zero_loss(small_history, padding):
     loss_half = physics_loss(torch.full_like(history, 0.5), history, GC, LC, H_PX, padding).item()
     assert loss_zero > 1e5 and loss_half > 1e5  # N/mm^2: 2H ~ 1e5 on the crack
     assert loss_exact < 1e-6 * min(loss_zero, loss_half)
+
+
+@pytest.mark.parametrize("padding", ["zeros", "replicate"])
+def test_pixel_solver_matches_a_direct_solve(small_history, padding):
+    import scipy.sparse
+    import scipy.sparse.linalg
+
+    from ifenn.picnn import laplacian_matrix
+
+    history = small_history[:, :50]  # a rectangle
+    matrix = scipy.sparse.diags(GC / LC + 2 * history.ravel()) - GC * LC / H_PX**2 * laplacian_matrix(64, 50, padding)
+    direct = scipy.sparse.linalg.spsolve(matrix.tocsc(), 2 * history.ravel()).reshape(history.shape)
+    np.testing.assert_allclose(solve_pixel_equation(history, GC, LC, H_PX, padding), direct, atol=1e-9)
+    warm = solve_pixel_equation(history, GC, LC, H_PX, padding, initial_guess=direct)
+    np.testing.assert_allclose(warm, direct, atol=1e-9)
 
 
 def test_uniform_history_gives_the_local_solution():
@@ -126,16 +149,17 @@ def test_gaussian_smoothing_keeps_constants_and_has_radius_eight():
 
 
 # --------------------------------------------------------------------------- tiles
-def test_tiles_reproduce_the_full_image_loss(small_history):
+@pytest.mark.parametrize("padding", ["zeros", "replicate"])
+def test_tiles_reproduce_the_full_image_loss(small_history, padding):
     """Crops with 9 pixels of context reproduce the full-image residual on their tiles."""
     torch.manual_seed(4)
-    model = PICNN().double()
+    model = PICNN(padding=padding).double()
     capped = np.minimum(small_history, model.history_cap)[None]
     tiles, in_zone = make_tiles(capped, tile_size=20, context=9, process_zone_history=GC / LC, process_zone_margin_px=4)
     assert in_zone.any() and not in_zone.all()
     assert tiles.weight.sum().item() == small_history.size  # the tiles partition the image
-    full = physics_loss(model.phase_field(as_batch(capped[0])), as_batch(capped[0]), GC, LC, H_PX)
-    tiled = physics_loss(model.phase_field(tiles.history), tiles.history, GC, LC, H_PX, pixel_weight=tiles.weight)
+    full = physics_loss(model.phase_field(as_batch(capped[0])), as_batch(capped[0]), GC, LC, H_PX, padding)
+    tiled = physics_loss(model.phase_field(tiles.history), tiles.history, GC, LC, H_PX, padding, tiles.weight)
     torch.testing.assert_close(tiled, full, rtol=1e-10, atol=0.0)
 
 

@@ -25,6 +25,7 @@ import functools
 from pathlib import Path
 
 import numpy as np
+import scipy.fft
 import scipy.ndimage
 import scipy.sparse
 import scipy.sparse.linalg
@@ -352,6 +353,27 @@ def laplacian_matrix(ny: int, nx: int, padding: str = "zeros") -> scipy.sparse.c
     return (neighbours + LAPLACIAN_CENTRE_WEIGHT * scipy.sparse.identity(n, format="csc")).tocsc()
 
 
+@functools.lru_cache(maxsize=16)
+def _laplacian_symbol(ny: int, nx: int, padding: str) -> np.ndarray:
+    """Eigenvalues of K9* - 3 I in the basis of the fast transform of ``_fast_transforms``.
+
+    K9* = (S_x + S_y)/2 + S_x S_y / 4 with S the 1-D sum of the two neighbours; with
+    "replicate" S has the DCT-II eigenvalues 2 cos(pi k / n) (exact for the matrix), with
+    "zeros" the DST-II ones 2 cos(pi (k + 1) / n) (a close preconditioner: DST-II puts the
+    zero half a pixel nearer than the matrix does). Shape (ny, nx).
+    """
+    shift = 1 if padding == "zeros" else 0
+    s_y = 2.0 * np.cos(np.pi * (np.arange(ny) + shift) / ny)[:, None]
+    s_x = 2.0 * np.cos(np.pi * (np.arange(nx) + shift) / nx)[None, :]
+    return 0.5 * (s_x + s_y) + 0.25 * s_x * s_y + LAPLACIAN_CENTRE_WEIGHT
+
+
+def _fast_transforms(padding: str):
+    if padding == "zeros":
+        return (lambda v: scipy.fft.dstn(v, type=2, norm="ortho"), lambda v: scipy.fft.idstn(v, type=2, norm="ortho"))
+    return (lambda v: scipy.fft.dctn(v, type=2, norm="ortho"), lambda v: scipy.fft.idctn(v, type=2, norm="ortho"))
+
+
 def solve_pixel_equation(
     history: np.ndarray,
     Gc: float,
@@ -359,33 +381,44 @@ def solve_pixel_equation(
     h_px: float,
     padding: str = "zeros",
     rtol: float = 1e-10,
-    maxiter: int = 2000,
+    maxiter: int = 1000,
+    initial_guess: np.ndarray | None = None,
 ) -> np.ndarray:
     """Exact phi of the pixel equation R(phi) = 0 for a history map (no network).
 
-    The equation is linear in phi: [(Gc/lc + 2H) I - (Gc lc / h_px^2) L] phi = 2H, with L
-    the cached K9* - 3 I matrix. The matrix is symmetric positive definite (diagonally
-    dominant), so it is solved with Jacobi-preconditioned conjugate gradients to relative
-    residual ``rtol`` (a few hundred iterations for a 400x400 map, well under a second).
+    The equation is linear in phi: A phi = 2H with A = diag(Gc/lc + 2H) - (Gc lc / h_px^2) L
+    and L the cached K9* - 3 I matrix; A is symmetric positive definite. It is solved by
+    conjugate gradients to relative residual ``rtol``, preconditioned with the exact
+    inverse of the constant-coefficient operator min(Gc/lc + 2H) I - (Gc lc / h_px^2) L,
+    applied with a fast cosine (replicate) or sine (zeros) transform: 15-45 iterations for
+    a 400x400 snt1 map (Jacobi needs ~270).
 
     history : (ny, nx) or (n, ny, nx) array, N/mm^2 (pass it capped if the network is).
+    initial_guess : optional phi of the same shape (e.g. the previous increment's);
+        default: the local solution 2H / (Gc/lc + 2H).
     Returns phi with the shape of ``history`` (float64).
     """
     history = np.asarray(history, dtype=np.float64)
     if history.ndim == 3:
-        return np.stack([solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter) for h in history])
+        guesses = [None] * len(history) if initial_guess is None else list(initial_guess)
+        return np.stack(
+            [solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter, g) for h, g in zip(history, guesses, strict=True)]
+        )
     ny, nx = history.shape
     h_flat = history.reshape(-1)
-    laplacian = laplacian_matrix(ny, nx, padding)
     diffusion = Gc * lc / h_px**2
-    system = (scipy.sparse.diags(Gc / lc + 2.0 * h_flat) - diffusion * laplacian).tocsr()
+    reaction = Gc / lc + 2.0 * h_flat
+    system = (scipy.sparse.diags(reaction) - diffusion * laplacian_matrix(ny, nx, padding)).tocsr()
     rhs = 2.0 * h_flat
-    jacobi = 1.0 / system.diagonal()
-    preconditioner = scipy.sparse.linalg.LinearOperator(system.shape, matvec=lambda v: jacobi * v)
-    initial = rhs / (Gc / lc + 2.0 * h_flat)
-    phi, info = scipy.sparse.linalg.cg(system, rhs, x0=initial, rtol=rtol, atol=0.0, maxiter=maxiter, M=preconditioner)
+    symbol = reaction.min() - diffusion * _laplacian_symbol(ny, nx, padding)
+    forward, inverse = _fast_transforms(padding)
+    preconditioner = scipy.sparse.linalg.LinearOperator(
+        system.shape, matvec=lambda r: inverse(forward(r.reshape(ny, nx)) / symbol).reshape(-1), dtype=np.float64
+    )
+    start = rhs / reaction if initial_guess is None else np.asarray(initial_guess, dtype=np.float64).reshape(-1)
+    phi, info = scipy.sparse.linalg.cg(system, rhs, x0=start, rtol=rtol, atol=0.0, maxiter=maxiter, M=preconditioner)
     if info != 0:
-        raise RuntimeError(f"pixel phase-field CG did not converge (info={info})")
+        raise RuntimeError(f"pixel phase-field CG did not converge in {maxiter} iterations")
     return phi.reshape(ny, nx)
 
 
