@@ -209,10 +209,11 @@ def test_save_load_roundtrip(tmp_path, small_history):
     torch.manual_seed(5)
     model = PICNN(padding="replicate", history_cap=1e5, input_scaling=InputScaling("log1p", 2.0))
     path = tmp_path / "picnn.pt"
-    save_picnn(model, path, h_px=H_PX, Gc=GC, lc=LC, config_hash="abc123", extra={"epochs": 3})
+    extra = {"settings": resolve_settings({"preset": "process_zone"}), "training_increments": [300, 310]}
+    save_picnn(model, path, h_px=H_PX, Gc=GC, lc=LC, config_hash="abc123", extra=extra)
     loaded, meta = load_picnn(path)
     np.testing.assert_array_equal(loaded.predict(small_history), model.predict(small_history))
-    assert meta["config_hash"] == "abc123" and meta["h_px"] == H_PX and meta["extra"] == {"epochs": 3}
+    assert meta["config_hash"] == "abc123" and meta["h_px"] == H_PX and meta["extra"] == extra
     assert loaded.input_scaling == InputScaling("log1p", 2.0) and loaded.history_cap == 1e5
     assert loaded.padding == "replicate" and [p.name for p in tmp_path.iterdir()] == ["picnn.pt"]
 
