@@ -40,6 +40,28 @@ rule train_picnn:
         "../scripts/train_picnn.py"
 
 
+use rule train_picnn as train_picnn_preset with:
+    # Optional (not in `all`): the paper's own settings, full images, hours on a CPU.
+    #   snakemake results/picnn/presets/text/scores.csv     (lr 1e-4, 10,000 epochs)
+    #   snakemake results/picnn/presets/released/scores.csv (lr 1e-3, 5,000 epochs)
+    output:
+        model="results/picnn/presets/{preset}/model.pt",
+        loss="results/picnn/presets/{preset}/loss.csv",
+        scores="results/picnn/presets/{preset}/scores.csv",
+        provenance="results/picnn/presets/{preset}/provenance.json",
+    wildcard_constraints:
+        preset="released|text",
+    params:
+        spec=lambda w: json.dumps({**training_spec(config), "preset": w.preset, "settings": {}}, sort_keys=True),
+    log:
+        "logs/training/train_{preset}.log",
+    benchmark:
+        "benchmarks/training/train_{preset}.tsv"
+    resources:
+        mem_mb=4000,
+        runtime=600,
+
+
 rule training_data_figure:
     input:
         "results/training/data.h5",
