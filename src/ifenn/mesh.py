@@ -9,7 +9,7 @@ is how the paper's meshes are built: 201 x 201 nodes + 60 twins for snt1.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -150,6 +150,3 @@ def read_dolfinx_mesh(xdmf_path: str | Path, comm=None):
 
     with io.XDMFFile(comm or MPI.COMM_WORLD, str(xdmf_path), "r") as stream:
         return stream.read_mesh(name="Grid")
-
-
-__all__ = ["StructuredMesh", "build_mesh", "element_size", "write_mesh", "read_dolfinx_mesh", "read_metadata", "asdict"]

@@ -18,7 +18,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from . import physics
-from .mesh import element_size
 from .pixels import PixelGrid
 
 QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
@@ -229,7 +228,3 @@ def _distance_to_segment(points: np.ndarray, start, end) -> np.ndarray:
     ab = b - a
     t = np.clip(((points - a) @ ab) / (ab @ ab), 0.0, 1.0)
     return np.linalg.norm(points - (a + t[:, None] * ab), axis=1)
-
-
-def element_size_of(scene: dict) -> float:
-    return element_size(scene)
