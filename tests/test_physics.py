@@ -3,9 +3,7 @@ AT2 profile, the homogeneous phase-field solution, the pixel map, separating sli
 
 import numpy as np
 import pytest
-import ufl
 from conftest import build_problem
-from dolfinx import fem
 
 from ifenn.phase_field_steps import FEMPhaseField
 
@@ -64,8 +62,7 @@ def test_fully_cracked_band_gives_the_1d_at2_profile(paper_config, tmp_path, lc_
     band (AT2). The fitted decay length must be within 5 % of lc."""
     lc = 0.05
     problem, step, h = _strip_problem(paper_config, tmp_path, lc, lc_over_h)
-    gp_x = fem.Expression(ufl.SpatialCoordinate(problem.domain), problem.quadrature_points).eval(problem.local_cells)
-    gp_x = gp_x.reshape(len(problem.local_cells), -1, 2)[..., 0]
+    gp_x = problem.gauss_point_coordinates[..., 0]
     values = np.zeros_like(problem.history.x.array)
     values[problem.q_dofs] = np.where(np.abs(gp_x) < h, 1.0e8, 0.0)
     problem.history.x.array[:] = values
@@ -98,11 +95,26 @@ def test_gauss_point_pixel_map_is_one_to_one_and_inverse(quick_config, tmp_path)
     problem.gauss_points_from_pixels(image, problem.history)
     np.testing.assert_array_equal(problem.pixels_from_gauss_points(problem.history), image)
     # every Gauss point lies inside its pixel (row 0 = bottom of the domain)
-    coords = fem.Expression(ufl.SpatialCoordinate(problem.domain), problem.quadrature_points).eval(problem.local_cells)
-    coords = coords.reshape(-1, 2)
+    coords = problem.gauss_point_coordinates.reshape(-1, 2)
     pix = problem.pixel_of_q_dof[problem.q_dofs.ravel()]
     xc, yc = problem.pixels.pixel_centres()
     iy, ix = np.divmod(pix, problem.pixels.nx_px)
     assert np.abs(coords[:, 0] - xc[ix]).max() < problem.pixels.h_px / 2
     assert np.abs(coords[:, 1] - yc[iy]).max() < problem.pixels.h_px / 2
     assert len(np.unique(pix)) == image.size
+
+
+def test_history_notch_sets_the_borden_initial_history(paper_config, tmp_path):
+    """A 'history' notch: H0 = B Gc/(2 lc) (1 - 4d/lc) within lc/4 of the segment, 0 beyond."""
+    lc = 0.05
+    scene = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [80, 80],
+             "notches": [{"kind": "history", "start": [0.0, 0.503], "end": [0.4, 0.503]}],
+             "boundary": {"bottom": {"x": "fixed", "y": "fixed"}, "top": {"y": "load"}}}
+    material = _material(paper_config, lc=lc)
+    problem, _ = build_problem(scene, material, paper_config["solver"]["linear_solver_presets"]["direct"], tmp_path)
+    x = problem.gauss_point_coordinates.reshape(-1, 2)
+    h0 = problem.history.x.array[problem.q_dofs.ravel()]
+    d = np.where(x[:, 0] <= 0.4, np.abs(x[:, 1] - 0.503), np.hypot(x[:, 0] - 0.4, x[:, 1] - 0.503))
+    expected = np.where(d <= lc / 4, material["history_notch_B"] * material["Gc"] / (2 * lc) * (1 - 4 * d / lc), 0.0)
+    np.testing.assert_allclose(h0, expected, rtol=1e-12, atol=1e-9)
+    assert (h0 > 0).sum() > 100 and h0.max() > 0.5 * material["history_notch_B"] * material["Gc"] / (2 * lc)

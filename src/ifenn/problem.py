@@ -105,7 +105,8 @@ class FractureProblem:
 
         # Pixel grid = Gauss-point grid (SPEC section 2).
         gp_coordinates = fem.Expression(ufl.SpatialCoordinate(domain), self.quadrature_points).eval(self.local_cells)
-        gp_coordinates = gp_coordinates.reshape(len(self.local_cells), -1, 2)
+        self.gauss_point_coordinates = gp_coordinates.reshape(len(self.local_cells), -1, 2)  # (cells, 4, 2), mm
+        gp_coordinates = self.gauss_point_coordinates
         self.pixels = PixelGrid.for_scene(scene)
         self.pixel_of_q_dof = np.empty(self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts, dtype=np.int64)
         self.pixel_of_q_dof[self.q_dofs] = self.pixels.pixel_index(gp_coordinates)
@@ -156,8 +157,7 @@ class FractureProblem:
         values = np.zeros(len(self.pixel_of_q_dof))
         if notches:
             Gc, lc, B = self.material["Gc"], self.material["lc"], self.material["history_notch_B"]
-            coords = fem.Expression(ufl.SpatialCoordinate(self.domain), self.quadrature_points).eval(self.local_cells)
-            coords = coords.reshape(-1, 2)
+            coords = self.gauss_point_coordinates.reshape(-1, 2)
             distance = np.min([_distance_to_segment(coords, n["start"], n["end"]) for n in notches], axis=0)
             h0 = np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0)
             values[self.q_dofs.ravel()] = h0
