@@ -232,6 +232,9 @@ def ifenn_run_spec(config: dict, run: str) -> dict:
     spec.update(name=run, fem_run=entry["fem_run"], save_fields=spec["save_fields"])
     for key in IFENN_OPTIONS:
         spec[key] = entry.get(key, config["ifenn"][key])
+    spec["inference"] = entry.get("inference", config["ifenn"]["inference"])
+    if spec["inference"] == "process_zone":  # its settings belong to the spec only when used
+        spec["process_zone"] = deep_merge(config["ifenn"]["process_zone"], entry.get("process_zone", {}))
     for key in ("stagger_max_iterations", "stagger_tolerance"):
         spec[key] = entry.get(key, spec[key])
     return spec
