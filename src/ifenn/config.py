@@ -127,6 +127,11 @@ def _semantic_problems(config: dict) -> list[str]:
                 )
             if abs(sx - ex) <= tol and abs(sy - ey) <= tol:
                 problems.append(f"config key '{nkey}': start and end coincide")
+    for name, schedule in config["schedules"].items():
+        adaptive = schedule.get("adaptive") if isinstance(schedule, dict) else None
+        if adaptive and not adaptive["step_min"] <= adaptive["step_initial"] <= adaptive["step_max"] <= adaptive["u_end"]:
+            problems.append(f"config key 'schedules.{name}.adaptive': need step_min <= step_initial <= step_max <= u_end, "
+                            f"got {adaptive}")
     for name, run in config["fem_runs"].items():
         key = f"fem_runs.{name}"
         if run["scene"] not in config["scenes"]:
@@ -138,8 +143,8 @@ def _semantic_problems(config: dict) -> list[str]:
             continue
         if "linear_solvers" in run and run["linear_solvers"] not in presets:
             problems.append(f"config key '{key}.linear_solvers': '{run['linear_solvers']}' is not a preset; allowed: {sorted(presets)}")
-        n_inc = sum(seg["increments"] for seg in config["schedules"][run["schedule"]])
-        bad = [i for i in run.get("save_fields", []) if i > n_inc]
+        n_inc = schedule_increments(config["schedules"][run["schedule"]])
+        bad = [i for i in run.get("save_fields", []) if n_inc is not None and i > n_inc]
         if bad:
             problems.append(f"config key '{key}.save_fields': increments {bad} exceed the schedule's {n_inc} increments (allowed 1..{n_inc})")
     picnn = config["picnn"]
@@ -147,8 +152,8 @@ def _semantic_problems(config: dict) -> list[str]:
         problems.append(f"config key 'picnn.training_run': '{picnn['training_run']}' is not a FEM run; allowed: {sorted(config['fem_runs'])}")
     else:
         run = config["fem_runs"][picnn["training_run"]]
-        n_inc = sum(seg["increments"] for seg in config["schedules"].get(run["schedule"], []))
-        bad = [i for i in picnn["training_increments"] if i > n_inc]
+        n_inc = schedule_increments(config["schedules"].get(run["schedule"], []))
+        bad = [i for i in picnn["training_increments"] if n_inc is not None and i > n_inc]
         if bad:
             problems.append(f"config key 'picnn.training_increments': {bad} exceed the {n_inc} increments of run '{picnn['training_run']}' (allowed 1..{n_inc})")
     try:
@@ -170,6 +175,11 @@ def _semantic_problems(config: dict) -> list[str]:
                 f"config key 'ifenn_runs.{name}.fem_run': '{run['fem_run']}' is not a FEM run; allowed: {sorted(config['fem_runs'])}"
             )
     return problems
+
+
+def schedule_increments(schedule: list[dict] | dict) -> int | None:
+    """Number of increments of a fixed schedule; None for an adaptive one."""
+    return None if isinstance(schedule, dict) else sum(seg["increments"] for seg in schedule)
 
 
 def load_values(schedule: list[dict]) -> list[float]:
@@ -194,20 +204,26 @@ def fem_run_spec(config: dict, run: str) -> dict:
     entry = config["fem_runs"][run]
     solver = config["solver"]
     preset = entry.get("linear_solvers", solver["linear_solvers"])
-    n_inc = sum(seg["increments"] for seg in config["schedules"][entry["schedule"]])
-    save = set(entry.get("save_fields", [])) | set(range(solver["save_every"], n_inc + 1, solver["save_every"]))
+    schedule = config["schedules"][entry["schedule"]]
+    n_inc = schedule_increments(schedule)
+    save = set(entry.get("save_fields", []))
+    if n_inc is not None:
+        save |= set(range(solver["save_every"], n_inc + 1, solver["save_every"]))
     if run == config["picnn"]["training_run"]:
         save |= set(config["picnn"]["training_increments"])
     views = config.get("figures", {}).get("views_3d")
     if views and config.get("ifenn_runs", {}).get(views["run"], {}).get("fem_run") == run:
         save.add(views["increment"])
+    # fixed schedules: every load value (and the saved increments) in the spec; adaptive
+    # ones: the controller's settings, and fields saved every save_every increments
+    loads = {"load": load_values(schedule)} if n_inc is not None else {"adaptive": schedule["adaptive"], "save_every": solver["save_every"]}
     return {
         "name": run,
         "scene_name": entry["scene"],
         "scene": config["scenes"][entry["scene"]],
         "material": config["material"],
         "schedule_name": entry["schedule"],
-        "load": load_values(config["schedules"][entry["schedule"]]),
+        **loads,
         "stagger_max_iterations": entry.get("stagger_max_iterations", solver["stagger_max_iterations"]),
         "stagger_tolerance": entry.get("stagger_tolerance", solver["stagger_tolerance"]),
         "linear_solvers": preset,

@@ -34,18 +34,26 @@ def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
     return switch, state, rows
 
 
-def make_predictor(spec: dict, model_path: str | Path | None, h_px: float):
-    """The phase-field predictor of a hybrid run: H image (capped) -> phi image."""
+def make_inference(spec: dict, model_path: str | Path | None, h_px: float):
+    """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image."""
+    from .process_zone import FullInference, ProcessZoneInference
+
+    sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
     if spec["predictor"] == "picnn":
         from .picnn import load_picnn
 
         model, _ = load_picnn(model_path)
-        return model.predict
+        if spec.get("inference", "full") == "process_zone":
+            zone = spec["process_zone"]
+            return ProcessZoneInference(model, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"])
+        return FullInference(model.predict, sigma, truncate)
     if spec["predictor"] == "exact_pixel":
         from .picnn import solve_pixel_equation
 
+        if spec.get("inference", "full") != "full":
+            raise ValueError("inference 'process_zone' needs the local PICNN; the exact pixel solve is global: use 'full'")
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
-        return lambda history: solve_pixel_equation(history, Gc, lc, h_px, spec["pixel_padding"])
+        return FullInference(lambda history: solve_pixel_equation(history, Gc, lc, h_px, spec["pixel_padding"]), sigma, truncate)
     raise ValueError(f"ifenn predictor '{spec['predictor']}' is unknown; allowed: {PREDICTORS}")
 
 
@@ -63,9 +71,8 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
         raise RuntimeError(f"FEM run {fem_dir} never reached phi_max > {spec['switch_phi_max']}: nothing for IFENN to take over")
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    predictor = make_predictor(spec, model_path, problem.pixels.h_px) if comm.rank == 0 else None
-    step = PixelPhaseField(problem, predictor, spec["predictor"], spec["history_cap"], spec["smoothing_sigma"],
-                           spec["smoothing_truncate"], spec["irreversible"])
+    inference = make_inference(spec, model_path, problem.pixels.h_px) if comm.rank == 0 else None
+    step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1})
     return run.run()

@@ -68,6 +68,81 @@ class NodalMap:
         function.x.array[:] = array[self.node_of_block].ravel()
 
 
+class FixedLoads:
+    """A fixed schedule: the prescribed displacement of increment k is ``loads[k - 1]``."""
+
+    adaptive = False
+
+    def __init__(self, loads: list[float]):
+        self.loads = loads
+        self.u_end = loads[-1]
+
+    def next_load(self, increment: int, u_previous: float) -> float | None:
+        return self.loads[increment - 1] if increment <= len(self.loads) else None
+
+    def judge(self, phi_change: float, converged: bool) -> bool:
+        return True
+
+    def is_last(self, increment: int, u: float) -> bool:
+        return increment == len(self.loads)
+
+    def state(self) -> dict:
+        return {}
+
+    def restore(self, state: dict, rows: list[dict]) -> None:
+        pass
+
+
+class AdaptiveLoads:
+    """Adaptive load stepping: the next step is cut by ``cut`` (and the increment redone)
+    when the phase field moved by more than ``phi_change_max`` anywhere (the crack
+    advanced) or the staggered iterations did not converge, and grown by ``grow`` (up to
+    ``step_max``) when phi moved by less than ``quiet_fraction`` x ``phi_change_max``
+    (nothing happens). Steps at ``step_min`` are always accepted. Ends at ``u_end``."""
+
+    adaptive = True
+
+    def __init__(self, settings: dict):
+        self.u_end = float(settings["u_end"])
+        self.step_min, self.step_max = float(settings["step_min"]), float(settings["step_max"])
+        self.grow, self.cut = float(settings["grow"]), float(settings["cut"])
+        self.phi_change_max, self.quiet = float(settings["phi_change_max"]), float(settings["quiet_fraction"])
+        self.step = float(settings["step_initial"])
+        self.rejected = 0  # rejected attempts since the last accepted increment
+
+    def next_load(self, increment: int, u_previous: float) -> float | None:
+        if u_previous >= self.u_end * (1 - 1e-12):
+            return None
+        return round(min(u_previous + self.step, self.u_end), 15)
+
+    def judge(self, phi_change: float, converged: bool) -> bool:
+        """Accept the attempted increment (True) or not; sets the next step either way."""
+        too_much = phi_change > self.phi_change_max or not converged
+        if too_much and self.step > self.step_min * (1 + 1e-9):
+            self.step = max(self.step * self.cut, self.step_min)
+            self.rejected += 1
+            return False
+        if phi_change < self.quiet * self.phi_change_max and converged:
+            self.step = min(self.step * self.grow, self.step_max)
+        return True
+
+    def is_last(self, increment: int, u: float) -> bool:
+        return u >= self.u_end * (1 - 1e-12)
+
+    def state(self) -> dict:
+        return {"load_step": self.step}
+
+    def restore(self, state: dict, rows: list[dict]) -> None:
+        if "load_step" in state:
+            self.step = float(state["load_step"])
+        elif len(rows) >= 2:  # continuing another run (IFENN from the FEM switch-over)
+            self.step = min(max(rows[-1]["u"] - rows[-2]["u"], self.step_min), self.step_max)
+
+
+def load_control(spec: dict):
+    return AdaptiveLoads(spec["adaptive"]) if spec.get("adaptive") else FixedLoads(spec["load"])
+
+
 def _write_checkpoint(path: Path, state: dict) -> None:
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as stream:
@@ -84,7 +159,9 @@ class StaggeredRun:
         ``row_constants``: columns with a fixed value on every computed row."""
         self.problem, self.step, self.spec = problem, phase_field_step, spec
         self.start, self.row_constants = start, dict(row_constants or {})
-        self.columns = HISTORY_COLUMNS + list(phase_field_step.extra_columns) + list(self.row_constants)
+        self.loads = load_control(spec)
+        adaptive_columns = ["rejected_steps"] if self.loads.adaptive else []
+        self.columns = HISTORY_COLUMNS + adaptive_columns + list(phase_field_step.extra_columns) + list(self.row_constants)
         self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
         self.comm = problem.comm
         self.rank0 = self.comm.rank == 0
@@ -131,6 +208,7 @@ class StaggeredRun:
                 return 0
             self._restore(self.start["state"] if self.rank0 else None)
             self.rows = [dict(row) for row in self.start["rows"]] if self.rank0 else []
+            self.loads.restore({}, self.comm.bcast(self.rows[-2:] if self.rank0 else None, root=0))
             return int(self.start["increment"])
         self._restore(found)
         if self.rank0:
@@ -138,10 +216,12 @@ class StaggeredRun:
             for row in self.rows:
                 for key in ("increment", "stagger_iterations", *self.row_constants):
                     row[key] = int(row[key])
+            self.loads.restore({k: found[k] for k in self.loads.state() if k in found}, self.rows)
             last = int(found["increment"])
             log.info("resuming %s after increment %d", self.spec["name"], last)
         else:
             last = None
+        self.loads.restore(self.comm.bcast(self.loads.state(), root=0), [])
         return self.comm.bcast(last, root=0)
 
     def _checkpoint(self, increment: int) -> None:
@@ -149,7 +229,7 @@ class StaggeredRun:
         if self.rank0:
             rows = np.array([[row[c] for c in self.columns] for row in self.rows], dtype=float)
             _write_checkpoint(self.work_dir / "checkpoint.npz",
-                              {**state, "rows": rows, "increment": increment, "spec_hash": self.hash})
+                              {**state, **self.loads.state(), "rows": rows, "increment": increment, "spec_hash": self.hash})
 
     def _snapshot(self, increment: int, u: float) -> None:
         state = self._state()
@@ -161,67 +241,94 @@ class StaggeredRun:
         spec = self.spec
         started = time.perf_counter()
         first = self._resume() + 1
-        loads = spec["load"]
-        save = set(spec["save_fields"]) | {len(loads)}
+        loads = self.loads
+        save = set(spec["save_fields"])
         self.switch_increment = self.comm.bcast(
             next((r["increment"] for r in self.rows if r["phi_max"] > spec["switch_phi_max"]), None), root=0)
+        u_previous = self.comm.bcast(self.rows[-1]["u"] if self.rank0 and self.rows else 0.0, root=0)
         bar = None
         if self.rank0 and self.progress:
             from tqdm import tqdm
-            bar = tqdm(total=len(loads), initial=first - 1, desc=spec["name"], unit="inc",
-                       mininterval=0.5 if os.isatty(2) else 10.0, dynamic_ncols=True)
-        for increment in range(first, len(loads) + 1):
-            u = loads[increment - 1]
+            # progress in micrometres of prescribed displacement: also right for adaptive steps
+            bar = tqdm(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"], unit="um",
+                       mininterval=0.5 if os.isatty(2) else 10.0, dynamic_ncols=True,
+                       bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+        increment = first
+        while (u := loads.next_load(increment, u_previous)) is not None:
             try:
-                row = self._increment(increment, u)
+                row = self._increment(increment, u, u_previous)
             except Exception as error:
                 if bar is not None:
                     bar.close()
                 raise type(error)(f"run {spec['name']}, increment {increment} (u = {u:g} mm): {error}") from error
             self.rows.append(row)
+            u = row["u"]  # adaptive steps may have cut it
+            last = loads.is_last(increment, u)
             if self.switch_increment is None and row["phi_max"] > spec["switch_phi_max"]:
                 self.switch_increment = increment
                 save.add(increment)
-            if increment in save:
+            if increment in save or (spec.get("save_every") and increment % spec["save_every"] == 0) or last:
                 self._snapshot(increment, u)
-            if increment % spec["checkpoint_every"] == 0 or increment == len(loads):
+            if increment % spec["checkpoint_every"] == 0 or last:
                 self._checkpoint(increment)
             if bar is not None:
-                bar.set_postfix(u=f"{u:.2e}", F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", refresh=False)
-                bar.update(1)
+                bar.set_postfix(inc=increment, F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", refresh=False)
+                bar.update(round((u - u_previous) * 1e3, 6))
+            u_previous, increment = row["u"], increment + 1
         if bar is not None:
             bar.close()
         self._finish(time.perf_counter() - started)
         return self.rows
 
-    def _increment(self, increment: int, u: float) -> dict:
-        p, step = self.problem, self.step
+    def _increment(self, increment: int, u: float, u_previous: float) -> dict:
+        """One load increment (staggered iterations); with adaptive loads, attempts that the
+        controller rejects are undone and redone with its smaller step (their time counts)."""
+        p, step, loads = self.problem, self.step, self.loads
         for key in step.timings:
             step.timings[key] = 0.0
         t_u = t_phi = t_h = 0.0
         t_start = time.perf_counter()
-        previous = p.phase_field_gp.x.array.copy()
-        for iteration in range(1, self.spec["stagger_max_iterations"] + 1):  # noqa: B007 (reported below)
-            t0 = time.perf_counter()
-            p.solve_displacement(u)
-            t1 = time.perf_counter()
-            p.update_history()
-            t2 = time.perf_counter()
-            step.step()
-            t3 = time.perf_counter()
-            t_u, t_h, t_phi = t_u + t1 - t0, t_h + t2 - t1, t_phi + t3 - t2
-            change = self.comm.allreduce(float(np.max(np.abs(p.phase_field_gp.x.array - previous), initial=0.0)), op=MPI.MAX)
-            if change < self.spec["stagger_tolerance"]:
+        accepted_gp = p.phase_field_gp.x.array.copy()
+        saved = (p.displacement.x.array.copy(), p.phase_field.x.array.copy()) if loads.adaptive else None
+        loads.rejected = 0
+        while True:
+            previous = accepted_gp.copy()
+            converged = False
+            for iteration in range(1, self.spec["stagger_max_iterations"] + 1):  # noqa: B007 (reported below)
+                t0 = time.perf_counter()
+                p.solve_displacement(u)
+                t1 = time.perf_counter()
+                p.update_history()
+                t2 = time.perf_counter()
+                step.step()
+                t3 = time.perf_counter()
+                t_u, t_h, t_phi = t_u + t1 - t0, t_h + t2 - t1, t_phi + t3 - t2
+                change = self._max_change(p.phase_field_gp.x.array, previous)
+                if change < self.spec["stagger_tolerance"]:
+                    converged = True
+                    break
+                previous = p.phase_field_gp.x.array.copy()
+            converged = converged or self.spec["stagger_max_iterations"] == 1
+            if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted_gp), converged):
                 break
-            previous = p.phase_field_gp.x.array.copy()
+            # rejected: undo the attempt, redo the increment with the controller's smaller step
+            p.displacement.x.array[:], p.phase_field.x.array[:] = saved
+            p.phase_field_gp.x.array[:] = accepted_gp
+            p.history.x.array[:] = p.history_previous.x.array
+            u = loads.next_load(increment, u_previous)
         p.accept_increment()
         force = p.reaction_force()
         phi_max = step.phase_field_max()
         if not (np.isfinite(force) and np.isfinite(phi_max)):
             raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
+        adaptive = {"rejected_steps": loads.rejected} if loads.adaptive else {}
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max,
                 "stagger_iterations": iteration, "t_displacement_s": t_u, "t_phase_field_s": t_phi,
-                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **step.timings, **self.row_constants}
+                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **adaptive, **step.timings,
+                **self.row_constants}
+
+    def _max_change(self, a: np.ndarray, b: np.ndarray) -> float:
+        return self.comm.allreduce(float(np.max(np.abs(a - b), initial=0.0)), op=MPI.MAX)
 
     # ------------------------------------------------------------- outputs
     def _finish(self, wall_s: float) -> None:
