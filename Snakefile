@@ -19,6 +19,7 @@ localrules:
     all,
     fem_spec,
     ifenn_spec,
+    stability_cell_spec,
 
 
 
@@ -28,6 +29,7 @@ include: "workflow/rules/training.smk"
 include: "workflow/rules/ifenn.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/figures.smk"
+include: "workflow/rules/stability.smk"
 
 
 rule all:
@@ -45,3 +47,4 @@ rule all:
         "results/figures/paper/views_3d.png",
         "results/figures/paper/mesh_study.png",
         "results/figures/paper/phase_field_time.png",
+        ["results/tables/stability.csv", "results/figures/stability_map.png"] if config.get("stability") else [],

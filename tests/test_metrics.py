@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.metrics import crack_iou, dissipated_energy, timing
+from ifenn.metrics import crack_iou, dissipated_energy, force_curve_error, timing
 
 
 @pytest.mark.parametrize("lc_over_h_px", [6, 12])
@@ -40,3 +40,16 @@ def test_timing_compares_the_same_increments():
     assert rows["fem"]["increments"] == rows["ifenn"]["increments"] == 2
     assert rows["ifenn"]["phase_field_time_vs_fem"] == pytest.approx(3.0)
     assert rows["fem"]["phase_field_cumulative_s"] == pytest.approx(2.0)
+
+
+def test_force_curve_error_compares_at_equal_displacement():
+    """The same curve sampled with other load steps has no error; 1 % more force everywhere
+    is a 1 % error; a drop taken 5 % of the range later is a large one."""
+    def curve(u):
+        return np.where(u < 0.6, 1000 * u, np.maximum(600 - 4000 * (u - 0.6), 0.0))
+
+    fine = np.linspace(0, 1, 2001)
+    coarse = np.concatenate([np.linspace(0, 0.6, 7), np.linspace(0.6005, 1, 801)])
+    assert force_curve_error(coarse, curve(coarse), fine, curve(fine)) < 1e-3
+    assert force_curve_error(fine, 1.01 * curve(fine), fine, curve(fine)) == pytest.approx(0.01, rel=1e-6)
+    assert force_curve_error(fine, curve(fine - 0.05), fine, curve(fine)) > 0.1

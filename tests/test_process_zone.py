@@ -53,7 +53,7 @@ def test_tolerance_bounds_the_stale_inputs(model):
     histories = list(_growing_histories())
     for history in histories:
         got = zone(np.clip(history, 0, 5e4))
-    scaled = zone._network_input(np.clip(histories[-1], 0, 5e4))
+    scaled = zone.local_phase_field(np.clip(histories[-1], 0, 5e4))
     assert np.abs(scaled - zone.reference).max() <= 1e-2
     assert np.abs(got - full(np.clip(histories[-1], 0, 5e4))).max() < 0.05
 

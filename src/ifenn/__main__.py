@@ -2,6 +2,7 @@
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf --fem-dir FEM_RUN_DIR [--model MODEL.pt] --out DIR
+  python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
 """
 
 from __future__ import annotations
@@ -27,6 +28,11 @@ def main(argv=None) -> int:
     hybrid.add_argument("--model", default=None, help="trained PICNN (needed when the predictor is 'picnn')")
     hybrid.add_argument("--out", required=True)
     hybrid.add_argument("--no-progress", action="store_true")
+    cell = sub.add_parser("cell", help="one stability-sweep cell: FEM, or IFENN continuing --fem-dir; failures are recorded")
+    cell.add_argument("--spec", required=True)
+    cell.add_argument("--out", required=True)
+    cell.add_argument("--fem-dir", default=None)
+    cell.add_argument("--model", default=None)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):
@@ -43,6 +49,13 @@ def main(argv=None) -> int:
         with open(args.spec) as stream:
             spec = json.load(stream)
         run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
+    elif args.command == "cell":
+        from .stability import run_cell
+
+        with open(args.spec) as stream:
+            spec = json.load(stream)
+        status = run_cell(spec, args.out, args.fem_dir, args.model)
+        logging.getLogger("ifenn").info("cell %s: %s", spec["name"], status)
     return 0
 
 

@@ -169,6 +169,13 @@ def _semantic_problems(config: dict) -> list[str]:
     for key, run in named:
         if run not in config.get("ifenn_runs", {}):
             problems.append(f"config key '{key}': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    sweep = config.get("stability")
+    if sweep:
+        if sweep["scene"] not in config["scenes"]:
+            problems.append(f"config key 'stability.scene': '{sweep['scene']}' is not a scene; allowed: {sorted(config['scenes'])}")
+        bad = [s for s in [sweep["step"], *sweep["steps"]] if not 1 <= sweep["u_end"] / s <= 100000]
+        if bad:
+            problems.append(f"config key 'stability.steps': steps {bad} give outside 1..100000 increments to u_end = {sweep['u_end']}")
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:
             problems.append(

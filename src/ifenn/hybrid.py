@@ -30,7 +30,7 @@ def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
     history = pd.read_csv(fem_dir / "history.csv")
     rows = history[history.increment <= max(switch, 0)].to_dict("records") if switch > 0 else history.to_dict("records")
     for row in rows:
-        row.update(t_inference_s=0.0, hybrid_active=0)
+        row.update(t_inference_s=0.0, evaluated_fraction=0.0, hybrid_active=0)
     return switch, state, rows
 
 
@@ -45,7 +45,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float):
         model, _ = load_picnn(model_path)
         if spec.get("inference", "full") == "process_zone":
             zone = spec["process_zone"]
-            return ProcessZoneInference(model, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"])
+            return ProcessZoneInference(model, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
+                                        local_scale=spec["material"]["Gc"] / spec["material"]["lc"])
         return FullInference(model.predict, sigma, truncate)
     if spec["predictor"] == "exact_pixel":
         from .picnn import solve_pixel_equation

@@ -37,12 +37,26 @@ def _fields(path: Path) -> tuple[dict, dict]:
         return maps, dict(h5.attrs)
 
 
+def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force_ref: np.ndarray, points: int = 4000) -> float:
+    """Relative L2 error of a force-displacement curve against a reference, in the norm of
+    L2(u) over the common u range: both curves interpolated linearly onto ``points``
+    uniform u values, so runs with different load steps compare fairly."""
+    lo, hi = max(u[0], u_ref[0]), min(u[-1], u_ref[-1])
+    grid = np.linspace(lo, hi, points)
+    a, b = np.interp(grid, u, force), np.interp(grid, u_ref, force_ref)
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def _nearest(maps: dict, u: float) -> int:
+    return min(maps, key=lambda k: abs(maps[k][0] - u))
+
+
 def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels: int = 3) -> dict:
-    """Force-curve and crack metrics of an IFENN run against its FEM run (same schedule)."""
+    """Force-curve and crack metrics of an IFENN run against its FEM run (same scene and
+    schedule; adaptive schedules are compared at equal u)."""
     fem = pd.read_csv(Path(fem_dir) / "history.csv")
     ifenn = pd.read_csv(Path(ifenn_dir) / "history.csv")
-    common = min(len(fem), len(ifenn))
-    f_fem, f_ifenn = fem.reaction_force.to_numpy()[:common], ifenn.reaction_force.to_numpy()[:common]
+    f_fem, f_ifenn = fem.reaction_force.to_numpy(), ifenn.reaction_force.to_numpy()
     peak_fem, peak_ifenn = int(np.argmax(f_fem)), int(np.argmax(f_ifenn))
     switch = int(ifenn.increment[ifenn.hybrid_active == 1].min()) if (ifenn.hybrid_active == 1).any() else len(ifenn) + 1
     row = {
@@ -50,22 +64,24 @@ def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels:
         "peak_force_fem": f_fem[peak_fem], "peak_force_ifenn": f_ifenn[peak_ifenn],
         "peak_force_rel_error": (f_ifenn[peak_ifenn] - f_fem[peak_fem]) / f_fem[peak_fem],
         "u_peak_fem": float(fem.u.iloc[peak_fem]), "u_peak_ifenn": float(ifenn.u.iloc[peak_ifenn]),
-        "force_l2_rel_error": float(np.linalg.norm(f_ifenn - f_fem) / np.linalg.norm(f_fem)),
+        "force_l2_rel_error": force_curve_error(ifenn.u.to_numpy(), f_ifenn, fem.u.to_numpy(), f_fem),
         "final_force_fraction_fem": f_fem[-1] / f_fem[peak_fem], "final_force_fraction_ifenn": f_ifenn[-1] / f_fem[peak_fem],
     }
     fem_maps, attrs = _fields(Path(fem_dir) / "fields.h5")
     ifenn_maps, _ = _fields(Path(ifenn_dir) / "fields.h5")
     h_px = float(attrs["h_px"])
-    last = max(set(fem_maps) & set(ifenn_maps))
-    row["dissipated_energy_fem"] = dissipated_energy(fem_maps[last][1], h_px, material["Gc"], material["lc"])
-    row["dissipated_energy_ifenn"] = dissipated_energy(ifenn_maps[last][1], h_px, material["Gc"], material["lc"])
+    last_fem = max(fem_maps)
+    last_ifenn = _nearest(ifenn_maps, fem_maps[last_fem][0])
+    row["dissipated_energy_fem"] = dissipated_energy(fem_maps[last_fem][1], h_px, material["Gc"], material["lc"])
+    row["dissipated_energy_ifenn"] = dissipated_energy(ifenn_maps[last_ifenn][1], h_px, material["Gc"], material["lc"])
     row["dissipated_energy_rel_error"] = row["dissipated_energy_ifenn"] / row["dissipated_energy_fem"] - 1.0
-    after = sorted(i for i in set(fem_maps) & set(ifenn_maps) if i > switch)
+    u_switch = row["u_switch"] if np.isfinite(row["u_switch"]) else np.inf
+    after = sorted(i for i in fem_maps if fem_maps[i][0] > u_switch)
     picks = [after[int(round(k))] for k in np.linspace(0, len(after) - 1, levels)] if after else []
     for k in range(levels):
         if k < len(picks):
             row[f"u_iou_{k + 1}"] = fem_maps[picks[k]][0]
-            row[f"crack_iou_{k + 1}"] = crack_iou(fem_maps[picks[k]][1], ifenn_maps[picks[k]][1])
+            row[f"crack_iou_{k + 1}"] = crack_iou(fem_maps[picks[k]][1], ifenn_maps[_nearest(ifenn_maps, fem_maps[picks[k]][0])][1])
         else:
             row[f"u_iou_{k + 1}"] = row[f"crack_iou_{k + 1}"] = np.nan
     return row
@@ -75,7 +91,8 @@ def timing(fem_history: pd.DataFrame, ifenn_history: pd.DataFrame) -> list[dict]
     """Mean seconds per increment of each step, FEM and IFENN, over the propagation stage
     (the increments IFENN computed); cumulative phase-field time over that stage."""
     hybrid = ifenn_history[ifenn_history.hybrid_active == 1]
-    stage = fem_history[fem_history.increment.isin(hybrid.increment)]
+    # after the switch-over; with adaptive steps the two runs may take different increments
+    stage = fem_history[fem_history.increment >= hybrid.increment.min()]
     rows = []
     for method, frame in (("fem", stage), ("ifenn", hybrid)):
         rows.append({

@@ -311,3 +311,38 @@ def phase_field_time_figure(timing, cases: list[dict], path) -> None:
         ax.legend()
     fig.suptitle("phase-field cost on this machine's CPU (one core): IFENN = pixels + inference + smoothing + back-projection")
     _save(fig, path)
+
+
+STABILITY_COLOURS = {"ok": "#4daf4a", "peak off": "#ffd92f", "crack path wrong": "#ff7f00",
+                     "no load drop": "#e41a1c", "diverged": "#6a3d9a"}
+
+
+def stability_map_figure(table, path) -> None:
+    """One panel per swept quantity (load step, lc/h, IFENN option): a coloured cell per
+    value and method with its label, the force error against the reference and the wall time."""
+    panels = list(dict.fromkeys(table.panel))
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6), squeeze=False,
+                             gridspec_kw={"width_ratios": [max(len(set(table[table.panel == p].value)), 1) for p in panels]})
+    for ax, panel in zip(axes[0], panels, strict=True):
+        rows = table[table.panel == panel]
+        values, methods = list(dict.fromkeys(rows.value)), ["fem", "ifenn"]
+        for _, row in rows.iterrows():
+            x, y = values.index(row.value), methods.index(row.method)
+            ax.add_patch(plt.Rectangle((x - 0.48, y - 0.45), 0.96, 0.9, color=STABILITY_COLOURS[row.label]))
+            error = row.get("force_l2_rel_error", np.nan)
+            text = row.label + (f"\nL2 {100 * error:.1f}%" if np.isfinite(error) else "")
+            if np.isfinite(row.get("wall_s", np.nan)):
+                text += f"\n{row.wall_s:.0f} s"
+            ax.text(x, y, text, ha="center", va="center", fontsize=7)
+        ax.set_xlim(-0.5, len(values) - 0.5)
+        shown = [m for m in methods if (rows.method == m).any()]
+        ax.set_ylim(methods.index(shown[0]) - 0.5, methods.index(shown[-1]) + 0.5)
+        ax.set_xticks(range(len(values)), values, rotation=30 if panel == "IFENN option" else 0, fontsize=8,
+                      ha="right" if panel == "IFENN option" else "center")
+        ax.set_yticks([methods.index(m) for m in shown], [m.upper() for m in shown])
+        ax.set_title(panel)
+        ax.set_aspect("auto")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in STABILITY_COLOURS.values()]
+    fig.legend(handles, list(STABILITY_COLOURS), loc="upper center", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 0.0))
+    fig.suptitle("Stability map: label of each cell (force-curve L2 error vs its reference, wall time)")
+    _save(fig, path)

@@ -13,12 +13,16 @@ r_net + r_s. Each window is evaluated on a crop with r_net (network) and r_s (fi
 pixels of context, clipped at the image edge, where the crop's padding equals the full
 image's; so with ``tolerance = 0`` the windows reproduce full inference to round-off.
 
-Error bound. A pixel counts as changed once its network input (the model's scaled capped
-history, e.g. log((H_c + r)/(c + r))) moved by more than ``tolerance`` from the value it
-had when it was last marked. Hence every input behind every stored output differs from the
-current input by at most 2 x tolerance, at every step; inputs that drift further are
-re-evaluated that step. ``refresh_every`` re-evaluates the whole image as a guard, and when
-the windows would cover more than ``full_fraction`` of the image the whole image is
+Error bound. Changes are measured in the units of the output: the local phase field
+phi_loc = 2 H_c / (Gc/lc + 2 H_c), the solution of the pixel equation for uniform H, which
+the network reproduces where H varies slowly; it is insensitive to H far below Gc/(2 lc)
+(the far field) and above it (the crack). A pixel counts as changed once its phi_loc moved
+by more than ``tolerance`` from the value it had when it was last marked. Hence every input
+behind every stored output differs from the current one by at most 2 x tolerance in phi_loc,
+at every step (inputs that drift further are re-evaluated that step); for the exact pixel
+equation, whose solution operator is monotone, the stored phi is then within about
+2 x tolerance of the current one. ``refresh_every`` re-evaluates the whole image as a guard,
+and when the windows would cover more than ``full_fraction`` of the image the whole image is
 evaluated instead (it is then cheaper).
 """
 
@@ -67,11 +71,12 @@ class ProcessZoneInference:
     name = "process_zone"
 
     def __init__(self, model, sigma: float | None, truncate: float = 4.0, tolerance: float = 1e-3,
-                 refresh_every: int = 100, full_fraction: float = 0.3):
+                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0):
         if not hasattr(model, "receptive_radius"):
             raise ValueError("process-zone inference needs a local predictor (the PICNN), not a global pixel solve")
         self.model, self.sigma, self.truncate = model, sigma, truncate
         self.tolerance, self.refresh_every, self.full_fraction = tolerance, refresh_every, full_fraction
+        self.local_scale = local_scale  # Gc / lc, N/mm^2
         self.r_net = int(model.receptive_radius)
         self.r_s = _smoothing_radius(sigma, truncate)
         self.reference = None   # network input when each pixel was last marked changed
@@ -81,28 +86,26 @@ class ProcessZoneInference:
         self.t_network = 0.0
         self.evaluated_fraction = 0.0
 
-    def _network_input(self, capped: np.ndarray) -> np.ndarray:
-        import torch
+    def local_phase_field(self, capped: np.ndarray) -> np.ndarray:
+        """phi_loc = 2 H_c / (Gc/lc + 2 H_c): what the change of a pixel is measured in."""
+        return 2.0 * capped / (self.local_scale + 2.0 * capped)
 
-        with torch.no_grad():
-            return self.model.network_input(torch.as_tensor(capped)).numpy()
-
-    def _full(self, capped: np.ndarray, scaled: np.ndarray) -> np.ndarray:
+    def _full(self, capped: np.ndarray, local: np.ndarray) -> np.ndarray:
         started = time.perf_counter()
         self.raw = self.model.predict(capped)
         self.t_network = time.perf_counter() - started
         self.smoothed = _smooth(self.raw, self.sigma, self.truncate)
-        self.reference = scaled
+        self.reference = local
         self.steps_since_full = 0
         self.evaluated_fraction = 1.0
         return self.smoothed
 
     def __call__(self, capped: np.ndarray) -> np.ndarray:
-        scaled = self._network_input(capped)
+        local = self.local_phase_field(capped)
         if self.raw is None or self.raw.shape != capped.shape or self.steps_since_full + 1 >= self.refresh_every:
-            return self._full(capped, scaled)
+            return self._full(capped, local)
         self.steps_since_full += 1
-        changed = np.abs(scaled - self.reference) > self.tolerance
+        changed = np.abs(local - self.reference) > self.tolerance
         self.t_network, self.evaluated_fraction = 0.0, 0.0
         if not changed.any():
             return self.smoothed
@@ -117,31 +120,48 @@ class ProcessZoneInference:
         area = sum((b[0].stop - b[0].start + 2 * (self.r_s + self.r_net)) * (b[1].stop - b[1].start + 2 * (self.r_s + self.r_net))
                    for b in boxes)
         if area > self.full_fraction * ny * nx:
-            return self._full(capped, scaled)
-        self.reference[changed] = scaled[changed]
+            return self._full(capped, local)
+        # Every output that depends on a pixel of the box grown by r_s - r_net is recomputed
+        # below from current inputs: those pixels all restart their drift from now (this
+        # keeps later re-evaluations together in time instead of pixel by pixel)
+        for box in boxes:
+            fresh = _resize(box, self.r_s - self.r_net, ny, nx)
+            self.reference[fresh] = local[fresh]
+        self.reference[changed] = local[changed]
         started = time.perf_counter()
-        raw_updates = []
+        raw_updates, evaluated = [], 0
         for box in boxes:
             # network output needed on the box grown by r_s (the filter's support), from inputs grown by r_net more
             out = _grow(box, self.r_s, ny, nx)
             crop = _grow(out, self.r_net, ny, nx)
             raw = self.model.predict(capped[crop])
             raw_updates.append((out, raw[_inner(out, crop)]))
+            evaluated += (crop[0].stop - crop[0].start) * (crop[1].stop - crop[1].start)
         self.t_network = time.perf_counter() - started
+        self.evaluated_fraction = evaluated / (ny * nx)
         for out, values in raw_updates:
             self.raw[out] = values
-        evaluated = 0
         for box in boxes:
             grown = _grow(box, self.r_s, ny, nx)
             self.smoothed[box] = _smooth(self.raw[grown], self.sigma, self.truncate)[_inner(box, grown)]
-            evaluated += (grown[0].stop - grown[0].start) * (grown[1].stop - grown[1].start)
-        self.evaluated_fraction = evaluated / (ny * nx)
         return self.smoothed
 
 
 def _grow(box: tuple[slice, slice], by: int, ny: int, nx: int) -> tuple[slice, slice]:
     return (slice(max(box[0].start - by, 0), min(box[0].stop + by, ny)),
             slice(max(box[1].start - by, 0), min(box[1].stop + by, nx)))
+
+
+def _resize(box: tuple[slice, slice], by: int, ny: int, nx: int) -> tuple[slice, slice]:
+    """Grow (by > 0) or shrink (by < 0) a box; sides on the image edge stay there."""
+    if by >= 0:
+        return _grow(box, by, ny, nx)
+    out = []
+    for side, n in zip(box, (ny, nx), strict=True):
+        start = side.start if side.start == 0 else side.start - by
+        stop = side.stop if side.stop == n else side.stop + by
+        out.append(slice(start, max(stop, start)))
+    return tuple(out)
 
 
 def _shift(box: tuple[slice, slice], region: tuple[slice, slice]) -> tuple[slice, slice]:

@@ -207,7 +207,8 @@ class StaggeredRun:
             if self.start is None:
                 return 0
             self._restore(self.start["state"] if self.rank0 else None)
-            self.rows = [dict(row) for row in self.start["rows"]] if self.rank0 else []
+            # rows of the run continued; columns it did not have (this step's extra ones) are 0
+            self.rows = [{**dict.fromkeys(self.columns, 0), **row} for row in self.start["rows"]] if self.rank0 else []
             self.loads.restore({}, self.comm.bcast(self.rows[-2:] if self.rank0 else None, root=0))
             return int(self.start["increment"])
         self._restore(found)
@@ -277,6 +278,9 @@ class StaggeredRun:
             u_previous, increment = row["u"], increment + 1
         if bar is not None:
             bar.close()
+        if self.comm.bcast(self.rank0 and not self._snapshots() and bool(self.rows), root=0):
+            # nothing computed (a hybrid run whose switch-over was the last increment): keep the final state
+            self._snapshot(self.comm.bcast(self.rows[-1]["increment"] if self.rank0 else None, root=0), u_previous)
         self._finish(time.perf_counter() - started)
         return self.rows
 

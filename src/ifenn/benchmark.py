@@ -1,0 +1,81 @@
+"""Phase-field step cost, FEM against IFENN (full image and process zone), on the same core
+in the same process: snt1/snt2/snt3 (the mesh study's runs, schedule II), a fixed number of
+increments of crack propagation from each FEM run's switch-over state.
+
+For each scene and method the run restarts from the same FEM state and takes the same loads;
+only the phase-field step differs. t_phase_field_s is everything that step does: for FEM the
+assembly and solve (and the evaluation at the Gauss points), for IFENN the Gauss point ->
+pixel conversion, capping, inference, smoothing, back-projection and irreversibility.
+"""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+METHODS = ("fem", "ifenn_full", "ifenn_process_zone")
+
+
+def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
+    from .hybrid import make_inference, switch_state
+    from .mesh import read_dolfinx_mesh
+    from .phase_field_steps import FEMPhaseField, PixelPhaseField
+    from .problem import FractureProblem
+    from .solver import StaggeredRun
+
+    switch, state, rows = switch_state(fem_dir)
+    spec = copy.deepcopy(spec)
+    spec.update(name=f"{spec['name']}-{method}", load=spec["load"][: switch + increments], save_fields=[],
+                checkpoint_every=10**6, inference="process_zone" if method == "ifenn_process_zone" else "full")
+    domain = read_dolfinx_mesh(mesh_path)
+    problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
+    if method == "fem":
+        step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
+        for row in rows:
+            for key in ("t_inference_s", "evaluated_fraction"):
+                row.pop(key, None)
+    else:
+        step = PixelPhaseField(problem, make_inference(spec, model_path, problem.pixels.h_px), spec["predictor"],
+                               spec["history_cap"], spec["irreversible"])
+    start = {"increment": switch, "state": state, "rows": rows}
+    run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,
+                       row_constants={"hybrid_active": int(method != "fem")})
+    history = pd.DataFrame(run.run())
+    return history[history.increment > switch]
+
+
+def phase_field_speed(config: dict, runs: list[str], model_path: str | Path, increments: int = 40,
+                      results: str | Path = "results") -> pd.DataFrame:
+    """One row per (run, method): mean seconds per increment of the displacement solve, the
+    phase-field step and the increment, the fraction of pixels the network evaluated, and
+    the phase-field step's speed-up over FEM's."""
+    from .config import ifenn_run_spec
+
+    results = Path(results)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for run in runs:
+            spec = ifenn_run_spec(config, run)
+            fem_dir = results / "fem" / spec["fem_run"]
+            mesh = results / "mesh" / f"{spec['scene_name']}.xdmf"
+            if spec.get("process_zone") is None:
+                spec["process_zone"] = config["ifenn"]["process_zone"]
+            for method in METHODS:
+                history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp))
+                nx, ny = spec["scene"]["elements"]
+                rows.append({"run": run, "elements": f"{nx}x{ny}", "pixels": f"{2 * nx}x{2 * ny}", "method": method,
+                             "increments": len(history),
+                             "t_displacement_s": history.t_displacement_s.mean(),
+                             "t_phase_field_s": history.t_phase_field_s.mean(),
+                             "t_phase_field_median_s": history.t_phase_field_s.median(),
+                             "t_inference_s": history.t_inference_s.mean() if "t_inference_s" in history else 0.0,
+                             "evaluated_fraction": history.evaluated_fraction.mean() if "evaluated_fraction" in history else 1.0,
+                             "t_increment_s": history.t_increment_s.mean(),
+                             "final_force": history.reaction_force.iloc[-1]})
+    table = pd.DataFrame(rows)
+    fem = table[table.method == "fem"].set_index("run").t_phase_field_s
+    table["phase_field_speedup_vs_fem"] = table.run.map(fem) / table.t_phase_field_s
+    return table

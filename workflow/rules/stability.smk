@@ -1,0 +1,83 @@
+# Stability where the methods fail (issue 5): a sweep of FEM and IFENN cells on a small
+# scene (config 'stability'), each classified automatically; see ifenn.stability.
+from ifenn import stability as _stability
+
+STABILITY_CELLS = _stability.cells(config) if config.get("stability") else {}
+
+
+def stability_cell_inputs(wildcards):
+    cell = STABILITY_CELLS[wildcards.cell]
+    inputs = {"spec": f"results/stability/{wildcards.cell}/spec.json"}
+    if cell["method"] == "ifenn":
+        inputs["fem_status"] = f"results/stability/{cell['fem_cell']}/status.json"
+        if cell["spec"]["predictor"] == "picnn":
+            inputs["model"] = "results/picnn/model.pt"
+    return inputs
+
+
+rule stability_cell_spec:
+    output:
+        "results/stability/{cell}/spec.json",
+    params:
+        spec=lambda w: json.dumps(STABILITY_CELLS[w.cell]["spec"], sort_keys=True),
+    wildcard_constraints:
+        cell="(fem|ifenn)_[A-Za-z0-9_.+-]+",
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/stability/{cell}_spec.log",
+    run:
+        from ifenn.io import write_json
+
+        write_json(output[0], json.loads(params.spec))
+
+
+rule stability_cell:
+    input:
+        unpack(stability_cell_inputs),
+    output:
+        "results/stability/{cell}/status.json",
+    params:
+        python=PYTHON,
+        fem=lambda w, input: f"--fem-dir {os.path.dirname(input.fem_status)}" if "fem_status" in input.keys() else "",
+        model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
+        out=lambda w, output: os.path.dirname(output[0]),
+    wildcard_constraints:
+        cell="(fem|ifenn)_[A-Za-z0-9_.+-]+",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/stability/{cell}.log",
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn cell --spec {input.spec} --out {params.out}"
+        " {params.fem} {params.model} > {log} 2>&1"
+
+
+rule stability_table:
+    input:
+        expand("results/stability/{cell}/status.json", cell=STABILITY_CELLS),
+    output:
+        report("results/tables/stability.csv", caption="../report/stability.rst", category="Stability"),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/tables/stability.log",
+    script:
+        "../scripts/stability_table.py"
+
+
+rule stability_figure:
+    input:
+        "results/tables/stability.csv",
+    output:
+        report("results/figures/stability_map.png", caption="../report/stability.rst", category="Stability"),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/figures/stability_map.log",
+    script:
+        "../scripts/stability_figure.py"
