@@ -43,8 +43,30 @@ def test_quick_profile_runs_end_to_end(quick_workflow):
     timing = pd.read_csv(results / "tables" / "timing.csv")
     assert set(timing.method) == {"fem", "ifenn"}
     for figure in ("training/training_data.png", "training/training.png", "paper/views_3d.png", "paper/mesh_study.png",
-                   "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png"):
+                   "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png",
+                   "speed_accuracy.png", "stability_map.png"):
         assert (results / "figures" / figure).stat().st_size > 10_000, figure
+
+
+def test_quick_profile_issue5_results(quick_workflow):
+    """Process-zone IFENN tracks full-image IFENN (force curve within 0.5 %) on every run of
+    the quick profile; the speed/accuracy table, the stability CSV and the phase-field
+    benchmark have a row for what the config names."""
+    from ifenn.metrics import force_curve_error
+
+    results = quick_workflow / "results"
+    for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
+        full, zone = (pd.read_csv(results / "ifenn" / name / "history.csv") for name in (run, f"{run}-pz"))
+        error = force_curve_error(zone.u.to_numpy(), zone.reaction_force.to_numpy(), full.u.to_numpy(), full.reaction_force.to_numpy())
+        assert error < 0.005, (run, error)
+    table = pd.read_csv(results / "tables" / "speed_accuracy.csv")
+    assert {"snt1", "sdnt"} == set(table.scene) and table.is_reference.sum() == 2
+    assert table.pareto_wall_s.any() and (table.force_l2_rel_error[~table.is_reference] > 0).all()
+    stability = pd.read_csv(results / "tables" / "stability.csv")
+    assert set(stability.panel) == {"load step", "lc/h", "IFENN option"}
+    assert set(stability.label) <= {"ok", "peak off", "crack path wrong", "no load drop", "diverged"}
+    speed = pd.read_csv(results / "benchmarks" / "phase_field_speed.csv")
+    assert set(speed.method) == {"fem", "ifenn_full", "ifenn_process_zone"} and (speed.t_phase_field_s > 0).all()
 
 
 def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_workflow, tmp_path):

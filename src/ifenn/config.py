@@ -57,6 +57,9 @@ def _fill_defaults(instance: Any, schema: dict, root: dict) -> None:
     """Insert the schema's ``default`` values for missing properties (in place)."""
     if "$ref" in schema:
         schema = root["$defs"][schema["$ref"].split("/")[-1]]
+    for branch in schema.get("oneOf", []):  # the branch of the instance's type (validated already)
+        if branch.get("type") == {dict: "object", list: "array"}.get(type(instance)):
+            _fill_defaults(instance, branch, root)
     if isinstance(instance, dict):
         for key, sub in schema.get("properties", {}).items():
             if key not in instance and "default" in sub:
@@ -169,6 +172,15 @@ def _semantic_problems(config: dict) -> list[str]:
     for key, run in named:
         if run not in config.get("ifenn_runs", {}):
             problems.append(f"config key '{key}': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    for scene, setup in config.get("speed_accuracy", {}).items():
+        for key, pool in (("reference", "fem_runs"), ("fem", "fem_runs"), ("ifenn", "ifenn_runs")):
+            names = [setup[key]] if key == "reference" else setup.get(key, [])
+            for run in names:
+                if run not in config.get(pool, {}):
+                    problems.append(f"config key 'speed_accuracy.{scene}.{key}': '{run}' is not in {pool}; allowed: {sorted(config.get(pool, {}))}")
+    for run in config.get("phase_field_benchmark", {}).get("runs", []):
+        if run not in config.get("ifenn_runs", {}):
+            problems.append(f"config key 'phase_field_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
     sweep = config.get("stability")
     if sweep:
         if sweep["scene"] not in config["scenes"]:

@@ -346,3 +346,40 @@ def stability_map_figure(table, path) -> None:
     fig.legend(handles, list(STABILITY_COLOURS), loc="upper center", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle("Stability map: label of each cell (force-curve L2 error vs its reference, wall time)")
     _save(fig, path)
+
+
+def speed_accuracy_figure(table, path) -> None:
+    """Per scene (rows): force-curve error against wall time of the whole run (left) and of
+    the propagation stage (right), log-log, FEM circles and IFENN squares, the Pareto front
+    of each panel as a line; the reference run is drawn at the bottom edge."""
+    scenes = list(dict.fromkeys(table.scene))
+    fig, axes = plt.subplots(len(scenes), 2, figsize=(13, 5.2 * len(scenes)), squeeze=False)
+    schedules = list(dict.fromkeys(table.schedule))
+    colours = dict(zip(schedules, plt.cm.tab10(np.arange(len(schedules)) % 10), strict=True))
+    for row_axes, scene in zip(axes, scenes, strict=True):
+        rows = table[table.scene == scene]
+        floor = 0.5 * rows.force_l2_rel_error[~rows.is_reference].min()
+        for ax, column, title in ((row_axes[0], "wall_s", "whole run"), (row_axes[1], "propagation_wall_s", "propagation stage")):
+            for _, r in rows.iterrows():
+                error = floor if r.is_reference else r.force_l2_rel_error
+                colour = colours[r.schedule]
+                ax.scatter(r[column], 100 * error, marker="o" if r.method == "fem" else "s", s=60,
+                           facecolor="white" if r.converged else colour,
+                           edgecolor="k" if r[f"pareto_{column}"] else colour, linewidth=1.8, zorder=3)
+                ax.annotate(r.run + (" (reference)" if r.is_reference else ""), (r[column], 100 * error), fontsize=6,
+                            xytext=(4, 3), textcoords="offset points")
+            front = rows[rows[f"pareto_{column}"]].sort_values(column)
+            ax.step(front[column], 100 * front.force_l2_rel_error, where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(f"wall time, {title} (s, sum of increments)")
+            ax.set_ylabel(f"force-curve L2 error vs {rows.reference.iloc[0]} (%)")
+            ax.set_title(f"{scene}: {title}")
+            ax.grid(True, which="both", alpha=0.3)
+        handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
+                   plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
+                   plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
+                   plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
+        handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
+        row_axes[1].legend(handles=handles, fontsize=7, loc="upper right")
+    _save(fig, path)

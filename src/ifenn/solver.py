@@ -160,7 +160,7 @@ class StaggeredRun:
         self.problem, self.step, self.spec = problem, phase_field_step, spec
         self.start, self.row_constants = start, dict(row_constants or {})
         self.loads = load_control(spec)
-        adaptive_columns = ["rejected_steps"] if self.loads.adaptive else []
+        adaptive_columns = ["rejected_steps", "rejected_iterations"] if self.loads.adaptive else []
         self.columns = HISTORY_COLUMNS + adaptive_columns + list(phase_field_step.extra_columns) + list(self.row_constants)
         self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
         self.comm = problem.comm
@@ -251,8 +251,9 @@ class StaggeredRun:
         if self.rank0 and self.progress:
             from tqdm import tqdm
             # progress in micrometres of prescribed displacement: also right for adaptive steps
+            # miniters ~ 0: refresh on time only (adaptive steps may be a thousand times smaller than others)
             bar = tqdm(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"], unit="um",
-                       mininterval=0.5 if os.isatty(2) else 10.0, dynamic_ncols=True,
+                       mininterval=0.5 if os.isatty(2) else 10.0, miniters=1e-12, dynamic_ncols=True,
                        bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
         increment = first
         while (u := loads.next_load(increment, u_previous)) is not None:
@@ -295,6 +296,7 @@ class StaggeredRun:
         accepted_gp = p.phase_field_gp.x.array.copy()
         saved = (p.displacement.x.array.copy(), p.phase_field.x.array.copy()) if loads.adaptive else None
         loads.rejected = 0
+        rejected_iterations = 0
         while True:
             previous = accepted_gp.copy()
             converged = False
@@ -316,6 +318,7 @@ class StaggeredRun:
             if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted_gp), converged):
                 break
             # rejected: undo the attempt, redo the increment with the controller's smaller step
+            rejected_iterations += iteration
             p.displacement.x.array[:], p.phase_field.x.array[:] = saved
             p.phase_field_gp.x.array[:] = accepted_gp
             p.history.x.array[:] = p.history_previous.x.array
@@ -325,7 +328,7 @@ class StaggeredRun:
         phi_max = step.phase_field_max()
         if not (np.isfinite(force) and np.isfinite(phi_max)):
             raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
-        adaptive = {"rejected_steps": loads.rejected} if loads.adaptive else {}
+        adaptive = {"rejected_steps": loads.rejected, "rejected_iterations": rejected_iterations} if loads.adaptive else {}
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max,
                 "stagger_iterations": iteration, "t_displacement_s": t_u, "t_phase_field_s": t_phi,
                 "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **adaptive, **step.timings,

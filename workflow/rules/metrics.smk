@@ -32,3 +32,43 @@ rule timing_table:
         "logs/tables/timing.log",
     script:
         "../scripts/timing_table.py"
+
+
+def speed_accuracy_inputs(wildcards):
+    runs = config["speed_accuracy"].values()
+    return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}
+                  | {f"results/ifenn/{r}/history.csv" for s in runs for r in s.get("ifenn", [])})
+
+
+rule speed_accuracy:
+    input:
+        speed_accuracy_inputs,
+    output:
+        table=report("results/tables/speed_accuracy.csv", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
+        figure=report("results/figures/speed_accuracy.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/tables/speed_accuracy.log",
+    script:
+        "../scripts/speed_accuracy.py"
+
+
+rule phase_field_benchmark:
+    input:
+        ifenn_specs=lambda w: [f"results/ifenn/{r}/spec.json" for r in config["phase_field_benchmark"]["runs"]],
+        fem=lambda w: [f"results/fem/{config['ifenn_runs'][r]['fem_run']}/fields.h5" for r in config["phase_field_benchmark"]["runs"]],
+        model="results/picnn/model.pt",
+    output:
+        report("results/benchmarks/phase_field_speed.csv", caption="../report/phase_field_speed.rst", category="Speed and accuracy"),
+    params:
+        python=PYTHON,
+    # all cores: nothing else runs while it measures
+    threads: workflow.cores
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/benchmarks/phase_field_speed.log",
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} {workflow.basedir}/benchmarks/phase_field_speed.py --model {input.model}"
+        " --out {output} > {log} 2>&1"

@@ -1,0 +1,9 @@
+"""Adapter: run histories -> ifenn.speed_accuracy table and figure."""
+from ifenn.io import write_csv
+from ifenn.plots import speed_accuracy_figure
+from ifenn.speed_accuracy import speed_accuracy_table
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+table = speed_accuracy_table(snakemake.config, "results")
+write_csv(snakemake.output.table, table)
+speed_accuracy_figure(table, snakemake.output.figure)
