@@ -47,26 +47,23 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     return history[history.increment > switch]
 
 
-def phase_field_speed(config: dict, runs: list[str], model_path: str | Path, increments: int = 40,
+def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | Path, increments: int = 40,
                       results: str | Path = "results") -> pd.DataFrame:
-    """One row per (run, method): mean seconds per increment of the displacement solve, the
-    phase-field step and the increment, the fraction of pixels the network evaluated, and
-    the phase-field step's speed-up over FEM's."""
-    from .config import ifenn_run_spec
-
+    """One row per (IFENN run spec, method): mean seconds per increment of the displacement
+    solve, the phase-field step and the increment, the fraction of pixels the network
+    evaluated, and the phase-field step's speed-up over FEM's. ``process_zone``: the settings
+    of the process-zone method (config 'ifenn.process_zone')."""
     results = Path(results)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for run in runs:
-            spec = ifenn_run_spec(config, run)
+        for spec in specs:
+            spec = {**spec, "process_zone": spec.get("process_zone") or process_zone}
             fem_dir = results / "fem" / spec["fem_run"]
             mesh = results / "mesh" / f"{spec['scene_name']}.xdmf"
-            if spec.get("process_zone") is None:
-                spec["process_zone"] = config["ifenn"]["process_zone"]
             for method in METHODS:
                 history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp))
                 nx, ny = spec["scene"]["elements"]
-                rows.append({"run": run, "elements": f"{nx}x{ny}", "pixels": f"{2 * nx}x{2 * ny}", "method": method,
+                rows.append({"run": spec["name"], "elements": f"{nx}x{ny}", "pixels": f"{2 * nx}x{2 * ny}", "method": method,
                              "increments": len(history),
                              "t_displacement_s": history.t_displacement_s.mean(),
                              "t_phase_field_s": history.t_phase_field_s.mean(),

@@ -381,5 +381,5 @@ def speed_accuracy_figure(table, path) -> None:
                    plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
                    plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
-        row_axes[1].legend(handles=handles, fontsize=7, loc="upper right")
+        row_axes[1].legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     _save(fig, path)

@@ -63,6 +63,8 @@ rule phase_field_benchmark:
         report("results/benchmarks/phase_field_speed.csv", caption="../report/phase_field_speed.rst", category="Speed and accuracy"),
     params:
         python=PYTHON,
+        increments=config.get("phase_field_benchmark", {}).get("increments", 40),
+        zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
     # all cores: nothing else runs while it measures
     threads: workflow.cores
     conda:
@@ -71,4 +73,4 @@ rule phase_field_benchmark:
         "logs/benchmarks/phase_field_speed.log",
     shell:
         "OMP_NUM_THREADS=1 {params.python} {workflow.basedir}/benchmarks/phase_field_speed.py --model {input.model}"
-        " --out {output} > {log} 2>&1"
+        " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone} --out {output} > {log} 2>&1"
