@@ -2,6 +2,7 @@
 import json
 import sys
 
+from ifenn import stability as _stability
 from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
 
 try:
@@ -53,3 +54,22 @@ def ifenn_pair(run):
     fem_run = config["ifenn_runs"][run]["fem_run"]
     return {"fem_history": f"results/fem/{fem_run}/history.csv", "fem_fields": f"results/fem/{fem_run}/fields.h5",
             "ifenn_history": f"results/ifenn/{run}/history.csv", "ifenn_fields": f"results/ifenn/{run}/fields.h5"}
+
+
+def speed_accuracy_inputs(wildcards):
+    runs = config["speed_accuracy"].values()
+    return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}
+                  | {f"results/ifenn/{r}/history.csv" for s in runs for r in s.get("ifenn", [])})
+
+
+STABILITY_CELLS = _stability.cells(config) if config.get("stability") else {}
+
+
+def stability_cell_inputs(wildcards):
+    cell = STABILITY_CELLS[wildcards.cell]
+    inputs = {"spec": f"results/stability/{wildcards.cell}/spec.json"}
+    if cell["method"] == "ifenn":
+        inputs["fem_status"] = f"results/stability/{cell['fem_cell']}/status.json"
+        if cell["spec"]["predictor"] == "picnn":
+            inputs["model"] = "results/picnn/model.pt"
+    return inputs

@@ -34,12 +34,6 @@ rule timing_table:
         "../scripts/timing_table.py"
 
 
-def speed_accuracy_inputs(wildcards):
-    runs = config["speed_accuracy"].values()
-    return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}
-                  | {f"results/ifenn/{r}/history.csv" for s in runs for r in s.get("ifenn", [])})
-
-
 rule speed_accuracy:
     input:
         speed_accuracy_inputs,
@@ -63,6 +57,7 @@ rule phase_field_benchmark:
         report("results/benchmarks/phase_field_speed.csv", caption="../report/phase_field_speed.rst", category="Speed and accuracy"),
     params:
         python=PYTHON,
+        script=os.path.join(workflow.basedir, "benchmarks", "phase_field_speed.py"),
         increments=config.get("phase_field_benchmark", {}).get("increments", 40),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
     # all cores: nothing else runs while it measures
@@ -72,5 +67,5 @@ rule phase_field_benchmark:
     log:
         "logs/benchmarks/phase_field_speed.log",
     shell:
-        "OMP_NUM_THREADS=1 {params.python} {workflow.basedir}/benchmarks/phase_field_speed.py --model {input.model}"
+        "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model}"
         " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone} --out {output} > {log} 2>&1"

@@ -1,18 +1,5 @@
 # Stability where the methods fail (issue 5): a sweep of FEM and IFENN cells on a small
 # scene (config 'stability'), each classified automatically; see ifenn.stability.
-from ifenn import stability as _stability
-
-STABILITY_CELLS = _stability.cells(config) if config.get("stability") else {}
-
-
-def stability_cell_inputs(wildcards):
-    cell = STABILITY_CELLS[wildcards.cell]
-    inputs = {"spec": f"results/stability/{wildcards.cell}/spec.json"}
-    if cell["method"] == "ifenn":
-        inputs["fem_status"] = f"results/stability/{cell['fem_cell']}/status.json"
-        if cell["spec"]["predictor"] == "picnn":
-            inputs["model"] = "results/picnn/model.pt"
-    return inputs
 
 
 rule stability_cell_spec:
