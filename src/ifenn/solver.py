@@ -98,7 +98,9 @@ class AdaptiveLoads:
     when the phase field moved by more than ``phi_change_max`` anywhere (the crack
     advanced) or the staggered iterations did not converge, and grown by ``grow`` (up to
     ``step_max``) when phi moved by less than ``quiet_fraction`` x ``phi_change_max``
-    (nothing happens). Steps at ``step_min`` are always accepted. Ends at ``u_end``."""
+    (nothing happens). Steps at ``step_min`` are always accepted; after ``hold_max`` of them
+    in a row (phi creeping without end, e.g. an IFENN crack that never cuts through) the step
+    grows again until phi is quiet. Ends at ``u_end``."""
 
     adaptive = True
 
@@ -108,7 +110,10 @@ class AdaptiveLoads:
         self.grow, self.cut = float(settings["grow"]), float(settings["cut"])
         self.phi_change_max, self.quiet = float(settings["phi_change_max"]), float(settings["quiet_fraction"])
         self.step = float(settings["step_initial"])
+        self.hold_max = int(settings.get("hold_max", 500))
         self.rejected = 0  # rejected attempts since the last accepted increment
+        self.held = 0      # consecutive increments accepted at step_min
+        self.released = False
 
     def next_load(self, increment: int, u_previous: float) -> float | None:
         if u_previous >= self.u_end * (1 - 1e-12):
@@ -117,12 +122,21 @@ class AdaptiveLoads:
 
     def judge(self, phi_change: float, converged: bool) -> bool:
         """Accept the attempted increment (True) or not; sets the next step either way."""
+        quiet = phi_change < self.quiet * self.phi_change_max and converged
+        if self.released:  # after hold_max increments at step_min: grow until phi is quiet again
+            self.released = not quiet
+            self.step = min(self.step * self.grow, self.step_max)
+            return True
         too_much = phi_change > self.phi_change_max or not converged
         if too_much and self.step > self.step_min * (1 + 1e-9):
             self.step = max(self.step * self.cut, self.step_min)
             self.rejected += 1
             return False
-        if phi_change < self.quiet * self.phi_change_max and converged:
+        self.held = self.held + 1 if self.step <= self.step_min * (1 + 1e-9) else 0
+        if self.held >= self.hold_max:
+            log.warning("phi kept changing for %d increments at the smallest step: growing the step again", self.held)
+            self.released, self.held = True, 0
+        if quiet or self.released:
             self.step = min(self.step * self.grow, self.step_max)
         return True
 
