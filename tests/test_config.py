@@ -8,7 +8,7 @@ from ifenn.config import ConfigError, fem_run_spec, load_values, validate_config
 
 
 def test_paper_config_has_the_seven_runs(paper_config):
-    assert set(paper_config["fem_runs"]) == {"snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"}
+    assert set(paper_config["fem_runs"]) >= {"snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"}
     assert len(fem_run_spec(paper_config, "snt1-III")["load"]) == 1500
 
 
@@ -33,6 +33,10 @@ def test_schedule_values():
         (lambda c: c["solver"].update(linear_solvers="fast"), ["solver.linear_solvers", "'fast'", "iterative"]),
         (lambda c: c.update(materials={}), ["Additional properties", "materials"]),
         (lambda c: c["schedules"]["I"][0].update(step=0.0), ["schedules.I[0].step", "0.0"]),
+        (lambda c: c["schedules"]["adaptive"]["adaptive"].update(cut=1.5), ["schedules.adaptive.adaptive.cut", "1.5"]),
+        (lambda c: c["schedules"]["adaptive"]["adaptive"].update(step_min=1.0e-3), ["schedules.adaptive.adaptive", "step_min <= step_initial"]),
+        (lambda c: c["stability"].update(scene="nowhere"), ["stability.scene", "'nowhere'", "allowed"]),
+        (lambda c: c["speed_accuracy"]["snt1"].update(reference="snt9"), ["speed_accuracy.snt1.reference", "'snt9'"]),
     ],
 )
 def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):

@@ -76,6 +76,14 @@ def _fill_defaults(instance: Any, schema: dict, root: dict) -> None:
             _fill_defaults(item, schema["items"], root)
 
 
+def _specific(errors):
+    """Errors of a 'oneOf' (e.g. a schedule: list of segments or adaptive) replaced by those of
+    the branch of the value's type, so the message names the key and value that are wrong."""
+    for err in errors:
+        inner = [e for e in err.context if e.validator != "type" or len(e.relative_path)] if err.validator == "oneOf" else []
+        yield from (_specific(inner) if inner else [err])
+
+
 def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
     """Validate against the JSON schema, fill defaults, then check cross-references and
     geometry. Returns a new, completed config; raises ConfigError listing every problem."""
@@ -84,7 +92,7 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
     validator = jsonschema.Draft202012Validator(schema)
     problems = [
         f"config key '{_key_path(err.absolute_path)}': {err.message}"
-        for err in sorted(validator.iter_errors(config), key=lambda e: list(map(str, e.absolute_path)))
+        for err in sorted(_specific(validator.iter_errors(config)), key=lambda e: list(map(str, e.absolute_path)))
     ]
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
