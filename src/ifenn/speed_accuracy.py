@@ -6,7 +6,9 @@ Reference: a FEM run named in the config (the finest schedule with converged sta
 range (metrics.force_curve_error). Wall time: the sum of the per-increment times recorded in
 history.csv (an IFENN run's history holds the FEM increments it continued, so its whole-run
 time includes the FEM stage before the switch-over); propagation stage = the increments after
-the switch-over (the first increment with phi_max > switch_phi_max).
+the switch-over (the first increment with phi_max > switch_phi_max). Wall times depend on the
+load of the machine while each run was made; 'displacement_solves' is the load-independent
+cost (each staggered iteration is one displacement solve and one phase-field step).
 """
 
 from __future__ import annotations
@@ -63,6 +65,9 @@ def speed_accuracy_table(config: dict, results: str | Path = "results") -> pd.Da
                     "schedule": fem_entry["schedule"],
                     "converged": fem_entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1,
                     "increments": len(history), "stagger_iterations": int(history.stagger_iterations.sum()),
+                    # load-independent cost: every displacement solve, rejected adaptive attempts included
+                    "displacement_solves": int(history.stagger_iterations.sum()
+                                               + (history.rejected_iterations.sum() if "rejected_iterations" in history else 0)),
                     "wall_s": float(history.t_increment_s.sum()),
                     "propagation_wall_s": float(history.t_increment_s[history.increment > switch].sum()),
                     "force_l2_rel_error": force_curve_error(history.u.to_numpy(), history.reaction_force.to_numpy(),
