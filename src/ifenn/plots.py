@@ -343,7 +343,7 @@ def stability_map_figure(table, path) -> None:
         ax.set_title(panel)
         ax.set_aspect("auto")
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in STABILITY_COLOURS.values()]
-    fig.legend(handles, list(STABILITY_COLOURS), loc="upper center", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.5, 0.0))
+    fig.legend(handles, list(STABILITY_COLOURS), loc="upper center", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.1))
     fig.suptitle("Stability map: label of each cell (force-curve L2 error vs its reference, wall time)")
     _save(fig, path)
 
