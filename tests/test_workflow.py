@@ -90,6 +90,13 @@ def test_lint_and_slurm_profile_dry_run(tmp_path):
     assert "fem" in dry.stdout
 
 
+def test_report_bundles_every_figure(quick_workflow):
+    result = _snakemake("--directory", str(quick_workflow), "--configfile", str(REPO / "config" / "quick.yaml"),
+                        "--report", "report.html", cwd=quick_workflow)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert (quick_workflow / "report.html").stat().st_size > 1_000_000
+
+
 def test_rerun_has_nothing_to_do(quick_workflow):
     result = _snakemake("--directory", str(quick_workflow), "--configfile", str(REPO / "config" / "quick.yaml"),
                         "-n", "--cores", "1", "all", cwd=quick_workflow)

@@ -73,3 +73,11 @@ def stability_cell_inputs(wildcards):
         if cell["spec"]["predictor"] == "picnn":
             inputs["model"] = "results/picnn/model.pt"
     return inputs
+
+
+def all_cores(wildcards):
+    """Every core Snakemake was given (a job that must run alone); 1 where none is set (--report)."""
+    try:
+        return workflow.cores
+    except WorkflowError:
+        return 1

@@ -61,7 +61,7 @@ rule phase_field_benchmark:
         increments=config.get("phase_field_benchmark", {}).get("increments", 40),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
     # all cores: nothing else runs while it measures
-    threads: workflow.cores
+    threads: all_cores
     conda:
         "../envs/ifenn.yaml"
     log:
