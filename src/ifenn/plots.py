@@ -383,8 +383,7 @@ def speed_accuracy_figure(table, path) -> None:
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
         row_axes[1].legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.suptitle("Speed against accuracy on a CPU, one thread per run (wall times under the load of the "
-                 "runs made alongside).
-On a CPU the full-image network step is ~3x slower than the FEM "
+                 "runs made alongside).\nOn a CPU the full-image network step is ~3x slower than the FEM "
                  "phase-field step it replaces; process-zone inference brings it to 0.7-1.3x (phase_field_speed.csv).",
                  fontsize=9)
     _save(fig, path)
