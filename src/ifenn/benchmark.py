@@ -34,9 +34,6 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
     if method == "fem":
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
-        for row in rows:
-            for key in ("t_inference_s", "evaluated_fraction"):
-                row.pop(key, None)
     else:
         step = PixelPhaseField(problem, make_inference(spec, model_path, problem.pixels.h_px), spec["predictor"],
                                spec["history_cap"], spec["irreversible"])

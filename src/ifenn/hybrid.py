@@ -29,8 +29,6 @@ def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
             state["phase_field"] = state["phase_field"][:, None]
     history = pd.read_csv(fem_dir / "history.csv")
     rows = history[history.increment <= max(switch, 0)].to_dict("records") if switch > 0 else history.to_dict("records")
-    for row in rows:
-        row.update(t_inference_s=0.0, evaluated_fraction=0.0, hybrid_active=0)
     return switch, state, rows
 
 

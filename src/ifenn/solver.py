@@ -221,7 +221,7 @@ class StaggeredRun:
             if self.start is None:
                 return 0
             self._restore(self.start["state"] if self.rank0 else None)
-            # rows of the run continued; columns it did not have (this step's extra ones) are 0
+            # rows of the run continued; columns it did not have (this step's extra ones, hybrid_active) are 0
             self.rows = [{**dict.fromkeys(self.columns, 0), **row} for row in self.start["rows"]] if self.rank0 else []
             self.loads.restore({}, self.comm.bcast(self.rows[-2:] if self.rank0 else None, root=0))
             return int(self.start["increment"])
@@ -312,7 +312,7 @@ class StaggeredRun:
         loads.rejected = 0
         rejected_iterations = 0
         while True:
-            previous = accepted_gp.copy()
+            previous = accepted_gp  # read only; rebound to a copy after each iteration
             converged = False
             for iteration in range(1, self.spec["stagger_max_iterations"] + 1):  # noqa: B007 (reported below)
                 t0 = time.perf_counter()
