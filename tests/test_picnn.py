@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import torch
 
+from ifenn.orbit import ConvolutionEvaluator, OrbitEvaluator
 from ifenn.picnn import (
     PICNN,
     InputScaling,
@@ -227,3 +228,22 @@ def test_score_picnn_against_itself_and_the_exact_solution(small_history):
     exact = solve_pixel_equation(small_history, GC, LC, H_PX)
     (untrained,) = score_picnn(model, [small_history], [exact])
     assert untrained["n_broken"] > 0 and untrained["mae_all"] > 0.05
+
+
+@pytest.mark.parametrize("padding", ["zeros", "replicate", "reflect"])
+def test_orbit_evaluation_is_the_same_network(padding):
+    """Orbit sums + GEMM (ifenn.orbit) give the convolutions' outputs, on whole images (tiled)
+    and on boxes at the corners, edges and inside; also for other kernel and channel sizes."""
+    torch.manual_seed(1)
+    net = PICNN(padding=padding, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    history = np.random.default_rng(2).lognormal(1.0, 2.0, (70, 83))
+    reference = net.predict(history)
+    assert np.abs(reference - 0.5).max() > 0.2  # a network far from trivial
+    evaluator = OrbitEvaluator(net, tile=29)
+    np.testing.assert_allclose(evaluator.predict(history), reference, atol=2e-6, rtol=0)
+    for box in [(slice(0, 5), slice(0, 9)), (slice(3, 40), slice(70, 83)), (slice(20, 41), slice(30, 52)), (slice(69, 70), slice(8, 9))]:
+        np.testing.assert_allclose(evaluator.predict_box(history, box), reference[box], atol=2e-6, rtol=0)
+        np.testing.assert_allclose(ConvolutionEvaluator(net).predict_box(history, box), reference[box], atol=2e-6, rtol=0)
+    wide = PICNN(channels=(1, 5, 9, 2, 1), kernel_size=7, padding=padding, init_gain=2.0).eval()
+    np.testing.assert_allclose(OrbitEvaluator(wide, tile=16).predict(history[:40, :30]), wide.predict(history[:40, :30]),
+                               atol=2e-6, rtol=0)

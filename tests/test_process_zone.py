@@ -4,15 +4,20 @@ import numpy as np
 import pytest
 import torch
 
+from ifenn.orbit import ConvolutionEvaluator, OrbitEvaluator
 from ifenn.picnn import PICNN, InputScaling
 from ifenn.process_zone import FullInference, ProcessZoneInference
 
 
 @pytest.fixture(scope="module")
-def model():
+def net():
     torch.manual_seed(3)
-    net = PICNN(padding="replicate", history_cap=5.0e4, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0)
-    return net.eval()
+    return PICNN(padding="replicate", history_cap=5.0e4, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+
+
+@pytest.fixture(scope="module")
+def model(net):
+    return OrbitEvaluator(net, tile=64)
 
 
 def _growing_histories(shape=(150, 160), steps=12, seed=0):
@@ -32,9 +37,12 @@ def _growing_histories(shape=(150, 160), steps=12, seed=0):
 
 
 @pytest.mark.parametrize("sigma", [2.0, None])
-def test_windows_equal_full_inference_with_zero_tolerance(model, sigma):
-    full = FullInference(model.predict, sigma, 4.0)
-    zone = ProcessZoneInference(model, sigma, 4.0, tolerance=0.0, refresh_every=1000, full_fraction=0.9)
+@pytest.mark.parametrize("evaluation", ["orbit", "convolution"])
+def test_windows_equal_full_inference_with_zero_tolerance(net, sigma, evaluation):
+    """Against the network's own convolutions on the whole image, for both evaluators."""
+    full = FullInference(net.predict, sigma, 4.0)
+    evaluator = OrbitEvaluator(net, tile=64) if evaluation == "orbit" else ConvolutionEvaluator(net)
+    zone = ProcessZoneInference(evaluator, sigma, 4.0, tolerance=0.0, refresh_every=1000, full_fraction=0.9)
     fractions = []
     for history in _growing_histories():
         expected = full(np.clip(history, 0, 5e4))

@@ -2,6 +2,10 @@
 in the same process: snt1/snt2/snt3 (the mesh study's runs, schedule II), a fixed number of
 increments of crack propagation from each FEM run's switch-over state.
 
+IFENN methods: the full image with the network's convolutions (torch conv2d, the paper's
+step), the full image with the same network evaluated as orbit sums + GEMM (ifenn.orbit),
+and the process zone (orbit evaluation).
+
 For each scene and method the run restarts from the same FEM state and takes the same loads;
 only the phase-field step differs. t_phase_field_s is everything that step does: for FEM the
 assembly and solve (and the evaluation at the Gauss points), for IFENN the Gauss point ->
@@ -16,7 +20,9 @@ from pathlib import Path
 
 import pandas as pd
 
-METHODS = ("fem", "ifenn_full", "ifenn_process_zone")
+#: method -> (inference, evaluation) of the IFENN step (None: the FEM step)
+METHODS = {"fem": None, "ifenn_full_convolution": ("full", "convolution"), "ifenn_full": ("full", "orbit"),
+           "ifenn_process_zone": ("process_zone", "orbit")}
 
 
 def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
@@ -28,8 +34,9 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
 
     switch, state, rows = switch_state(fem_dir)
     spec = copy.deepcopy(spec)
-    spec.update(name=f"{spec['name']}-{method}", load=spec["load"][: switch + increments], save_fields=[],
-                checkpoint_every=10**6, inference="process_zone" if method == "ifenn_process_zone" else "full")
+    spec.update(name=f"{spec['name']}-{method}", load=spec["load"][: switch + increments], save_fields=[], checkpoint_every=10**6)
+    if METHODS[method]:
+        spec.update(inference=METHODS[method][0], evaluation=METHODS[method][1])
     domain = read_dolfinx_mesh(mesh_path)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
     if method == "fem":

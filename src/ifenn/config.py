@@ -262,7 +262,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
     }
 
 
-IFENN_OPTIONS = ("predictor", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
+IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
 
 
 def ifenn_run_spec(config: dict, run: str) -> dict:

@@ -38,14 +38,16 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float):
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
     if spec["predictor"] == "picnn":
+        from .orbit import make_evaluator
         from .picnn import load_picnn
 
         model, _ = load_picnn(model_path)
+        evaluator = make_evaluator(model, spec.get("evaluation", "orbit"))
         if spec.get("inference", "full") == "process_zone":
             zone = spec["process_zone"]
-            return ProcessZoneInference(model, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
+            return ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
                                         local_scale=spec["material"]["Gc"] / spec["material"]["lc"])
-        return FullInference(model.predict, sigma, truncate)
+        return FullInference(evaluator.predict, sigma, truncate)
     if spec["predictor"] == "exact_pixel":
         from .picnn import solve_pixel_equation
 

@@ -348,10 +348,11 @@ def stability_map_figure(table, path) -> None:
     _save(fig, path)
 
 
-def speed_accuracy_figure(table, path) -> None:
+def speed_accuracy_figure(table, path, benchmark=None) -> None:
     """Per scene (rows): force-curve error against wall time of the whole run (left) and of
     the propagation stage (right), log-log, FEM circles and IFENN squares, the Pareto front
-    of each panel as a line; the reference run is drawn at the bottom edge."""
+    of each panel as a line; the reference run is drawn at the bottom edge. ``benchmark``
+    (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
     scenes = list(dict.fromkeys(table.scene))
     fig, axes = plt.subplots(len(scenes), 2, figsize=(13, 5.2 * len(scenes)), squeeze=False)
     schedules = list(dict.fromkeys(table.schedule))
@@ -382,8 +383,13 @@ def speed_accuracy_figure(table, path) -> None:
                    plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
         row_axes[1].legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    fig.suptitle("Speed against accuracy on a CPU, one thread per run (wall times under the load of the "
-                 "runs made alongside).\nOn a CPU the full-image network step is ~3x slower than the FEM "
-                 "phase-field step it replaces; process-zone inference brings it to 0.7-1.3x (phase_field_speed.csv).",
-                 fontsize=9)
+    title = "Speed against accuracy on a CPU, one thread per run (wall times under the load of the runs made alongside)."
+    if benchmark is not None and len(benchmark):
+        names = {"ifenn_full_convolution": "full image, convolutions (the paper)", "ifenn_full": "full image, orbit evaluation",
+                 "ifenn_process_zone": "process zone"}
+        ranges = [f"{label} {g.min():.2g}-{g.max():.2g}x" for method, label in names.items()
+                  if len(g := benchmark[benchmark.method == method].phase_field_speedup_vs_fem)]
+        title += ("\nIFENN phase-field step against the FEM one it replaces, same core (phase_field_speed.csv, "
+                  f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
+    fig.suptitle(title, fontsize=9)
     _save(fig, path)

@@ -206,6 +206,13 @@ class FractureProblem:
     # ------------------------------------------------------------------ pixels
     def pixels_from_gauss_points(self, function) -> np.ndarray | None:
         """Gauss-point field -> (ny_px, nx_px) pixel image on rank 0 (None elsewhere)."""
+        if self.comm.size == 1:
+            if not hasattr(self, "_q_dof_of_pixel"):  # one gather per call; one-to-one checked once
+                index = self.pixel_of_q_dof[self.owned_q_dofs]
+                self.pixels.image_from(index, np.zeros(len(index)))
+                self._q_dof_of_pixel = np.empty(len(index), dtype=np.int64)
+                self._q_dof_of_pixel[index] = self.owned_q_dofs
+            return function.x.array[self._q_dof_of_pixel].reshape(self.pixels.shape)
         index = self.pixel_of_q_dof[self.owned_q_dofs]
         values = function.x.array[self.owned_q_dofs]
         if self.comm.size > 1:

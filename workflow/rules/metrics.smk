@@ -36,7 +36,8 @@ rule timing_table:
 
 rule speed_accuracy:
     input:
-        speed_accuracy_inputs,
+        runs=speed_accuracy_inputs,
+        benchmark="results/benchmarks/phase_field_speed.csv",
     output:
         table=report("results/tables/speed_accuracy.csv", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
         figure=report("results/figures/speed_accuracy.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),

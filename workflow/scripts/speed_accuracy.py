@@ -1,4 +1,6 @@
-"""Adapter: run histories -> ifenn.speed_accuracy table and figure."""
+"""Adapter: run histories (+ the phase-field benchmark, quoted in the figure) -> ifenn.speed_accuracy table and figure."""
+import pandas as pd
+
 from ifenn.io import write_csv
 from ifenn.plots import speed_accuracy_figure
 from ifenn.speed_accuracy import speed_accuracy_table
@@ -6,4 +8,4 @@ from ifenn.speed_accuracy import speed_accuracy_table
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 table = speed_accuracy_table(snakemake.config, "results")
 write_csv(snakemake.output.table, table)
-speed_accuracy_figure(table, snakemake.output.figure)
+speed_accuracy_figure(table, snakemake.output.figure, pd.read_csv(snakemake.input.benchmark))
