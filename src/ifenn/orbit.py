@@ -37,7 +37,7 @@ class OrbitEvaluator:
     evaluates only a box of it.
     """
 
-    def __init__(self, model, tile: int = 192, strip_pixels: int = 3072):
+    def __init__(self, model, tile: int = 192, strip_pixels: int = 8192):
         self.model, self.tile, self.strip_pixels = model, int(tile), int(strip_pixels)
         self.radius = model.kernel_size // 2
         self.receptive_radius = int(model.receptive_radius)
