@@ -27,7 +27,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-Box = tuple[slice, slice]
+from .pixels import Box, box_within, grow_box
 
 
 class OrbitEvaluator:
@@ -91,11 +91,7 @@ class OrbitEvaluator:
             p = self._pad(x, edges)
             c, oy, ox = p.shape[0], p.shape[1] - 2 * r, p.shape[2] - 2 * r
             # a few rows at a time, so that the sums (n_free c values per pixel) stay in cache
-            rows = max(2, self.strip_pixels // ox)
-            if rows >= oy:
-                sums = torch.empty((n_free, c, oy, ox), dtype=x.dtype)
-                self._orbit_sums(p, sums, self.pairs)
-                return torch.mm(weight, sums.reshape(n_free * c, oy * ox)).reshape(n_out, oy, ox)
+            rows = min(max(2, self.strip_pixels // ox), oy)
             result = torch.empty((n_out, oy, ox), dtype=x.dtype)
             buffer = torch.empty(n_free * c * rows * ox, dtype=x.dtype)
             for start in range(0, oy, rows):
@@ -134,16 +130,14 @@ class OrbitEvaluator:
         within the receptive radius only."""
         ny, nx = history.shape
         R = self.receptive_radius
-        crop = (slice(max(box[0].start - R, 0), min(box[0].stop + R, ny)),
-                slice(max(box[1].start - R, 0), min(box[1].stop + R, nx)))
+        crop = grow_box(box, R, history.shape)
         edges = (crop[0].start == 0, crop[0].stop == ny, crop[1].start == 0, crop[1].stop == nx)
         with torch.no_grad():
             x = self.model.network_input(torch.as_tensor(np.ascontiguousarray(history[crop]), dtype=self.dtype))
             phi = self._evaluate(x, edges)
         # phi covers the crop less R on every side not on the edge
-        y0 = crop[0].start + (0 if edges[0] else R)
-        x0 = crop[1].start + (0 if edges[2] else R)
-        return phi.numpy()[box[0].start - y0:box[0].stop - y0, box[1].start - x0:box[1].stop - x0].astype(np.float64)
+        covered = (slice(crop[0].start + (0 if edges[0] else R), None), slice(crop[1].start + (0 if edges[2] else R), None))
+        return phi.numpy()[box_within(box, covered)].astype(np.float64)
 
     def predict(self, history: np.ndarray) -> np.ndarray:
         """phi (float64) of a whole (ny, nx) or (n, ny, nx) history map, tile by tile."""
@@ -172,12 +166,8 @@ class ConvolutionEvaluator:
         return self.model.predict(history)
 
     def predict_box(self, history: np.ndarray, box: Box) -> np.ndarray:
-        ny, nx = history.shape
-        R = self.receptive_radius
-        crop = (slice(max(box[0].start - R, 0), min(box[0].stop + R, ny)),
-                slice(max(box[1].start - R, 0), min(box[1].stop + R, nx)))
-        phi = self.model.predict(history[crop])
-        return phi[box[0].start - crop[0].start:box[0].stop - crop[0].start, box[1].start - crop[1].start:box[1].stop - crop[1].start]
+        crop = grow_box(box, self.receptive_radius, history.shape)
+        return self.model.predict(history[crop])[box_within(box, crop)]
 
 
 EVALUATIONS = {"orbit": OrbitEvaluator, "convolution": ConvolutionEvaluator}

@@ -50,3 +50,21 @@ class PixelGrid:
 
     def attrs(self) -> dict:
         return {"x0": self.x0, "y0": self.y0, "h_px": self.h_px, "nx_px": self.nx_px, "ny_px": self.ny_px}
+
+
+# Boxes on pixel images: (row slice, column slice) with non-negative start and stop.
+Box = tuple[slice, slice]
+
+
+def grow_box(box: Box, by: int, shape: tuple[int, int]) -> Box:
+    """``box`` grown by ``by`` pixels on every side, clipped to an image of ``shape``."""
+    return tuple(slice(max(side.start - by, 0), min(side.stop + by, n)) for side, n in zip(box, shape, strict=True))
+
+
+def box_within(box: Box, crop: Box) -> Box:
+    """``box`` in the coordinates of the crop ``crop`` (which holds it)."""
+    return tuple(slice(side.start - c.start, side.stop - c.start) for side, c in zip(box, crop, strict=True))
+
+
+def box_area(box: Box) -> int:
+    return (box[0].stop - box[0].start) * (box[1].stop - box[1].start)

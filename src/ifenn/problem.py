@@ -111,6 +111,11 @@ class FractureProblem:
         self.pixel_of_q_dof = np.empty(self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts, dtype=np.int64)
         self.pixel_of_q_dof[self.q_dofs] = self.pixels.pixel_index(gp_coordinates)
         self.owned_q_dofs = self.q_dofs[: self.n_cells_owned].ravel()
+        if self.comm.size == 1:  # serial: the image is one gather (the map is one-to-one, checked here)
+            index = self.pixel_of_q_dof[self.owned_q_dofs]
+            self.pixels.image_from(index, np.zeros(len(index)))
+            self.q_dof_of_pixel = np.empty(len(index), dtype=np.int64)
+            self.q_dof_of_pixel[index] = self.owned_q_dofs
 
         self._build_boundary_conditions()
         self._build_equilibrium(petsc["displacement"])
@@ -207,12 +212,7 @@ class FractureProblem:
     def pixels_from_gauss_points(self, function) -> np.ndarray | None:
         """Gauss-point field -> (ny_px, nx_px) pixel image on rank 0 (None elsewhere)."""
         if self.comm.size == 1:
-            if not hasattr(self, "_q_dof_of_pixel"):  # one gather per call; one-to-one checked once
-                index = self.pixel_of_q_dof[self.owned_q_dofs]
-                self.pixels.image_from(index, np.zeros(len(index)))
-                self._q_dof_of_pixel = np.empty(len(index), dtype=np.int64)
-                self._q_dof_of_pixel[index] = self.owned_q_dofs
-            return function.x.array[self._q_dof_of_pixel].reshape(self.pixels.shape)
+            return function.x.array[self.q_dof_of_pixel].reshape(self.pixels.shape)
         index = self.pixel_of_q_dof[self.owned_q_dofs]
         values = function.x.array[self.owned_q_dofs]
         if self.comm.size > 1:

@@ -37,6 +37,8 @@ import time
 import numpy as np
 import scipy.ndimage
 
+from .pixels import Box, box_area, box_within, grow_box
+
 
 def _smoothing_radius(sigma: float | None, truncate: float) -> int:
     # scipy.ndimage.gaussian_filter's kernel radius
@@ -84,7 +86,7 @@ class ProcessZoneInference:
         self.local_scale = local_scale  # Gc / lc, N/mm^2
         self.r_net = int(evaluator.receptive_radius)
         self.r_s = _smoothing_radius(sigma, truncate)
-        self.reference = None   # phi_loc of each pixel's input when it was last evaluated with
+        self.reference = None   # phi_loc of each pixel's input when its drift last restarted
         self.raw = None         # stored network output
         self.smoothed = None    # stored smoothed output
         self.steps_since_full = 0
@@ -96,7 +98,7 @@ class ProcessZoneInference:
         return 2.0 * capped / (self.local_scale + 2.0 * capped)
 
     def _history_at(self, phi_loc: np.ndarray) -> np.ndarray:
-        """The inverse of phi_loc: H = (Gc/lc) phi / (2 (1 - phi)); +inf from phi = 1 on, 0 below 0."""
+        """The inverse of phi_loc: H = (Gc/lc) phi / (2 (1 - phi)); +inf from phi = 1 on, -inf from 0 down."""
         with np.errstate(divide="ignore", invalid="ignore"):
             history = self.local_scale * phi_loc / (2.0 * (1.0 - phi_loc))
         return np.where(phi_loc >= 1.0, np.inf, np.where(phi_loc <= 0.0, -np.inf, history))
@@ -152,9 +154,9 @@ class ProcessZoneInference:
             members = group_of == group
             if members.any():
                 r, c = rows[members], cols[members]
-                components.append(_grow((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), R, ny, nx))
-        parts = [[box for box in _split(changed, component, R)] for component in components]
-        evaluated = sum(_area(_grow(box, R, ny, nx)) for boxes in parts for box in boxes)  # inputs read
+                components.append(grow_box((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), R, (ny, nx)))
+        parts = [_split(changed, component, R) for component in components]
+        evaluated = sum(box_area(grow_box(box, R, (ny, nx))) for boxes in parts for box in boxes)  # inputs read
         if evaluated > self.full_fraction * ny * nx:
             return self._full(capped)
         started = time.perf_counter()
@@ -166,28 +168,24 @@ class ProcessZoneInference:
         for component, boxes in zip(components, parts, strict=True):
             # every output that depends on an input covered by the boxes was just computed from
             # its current value: those inputs restart their drift (outside the image counts as covered)
-            region = _grow(component, R, ny, nx)
+            region = grow_box(component, R, (ny, nx))
             covered = np.zeros((region[0].stop - region[0].start, region[1].stop - region[1].start), dtype=bool)
             for box in boxes:
-                covered[_inner(box, region)] = True
+                covered[box_within(box, region)] = True
             on_edge = ((region[0].start == 0, region[0].stop == ny), (region[1].start == 0, region[1].stop == nx))
             fresh = scipy.ndimage.minimum_filter(np.pad(covered, R, constant_values=on_edge), size=2 * R + 1)[R:-R, R:-R]
             self._set_reference(capped, region, fresh)
             # the filter is linear and local: the smoothed image changes within r_s of the boxes
             if self.sigma:
-                out = _grow(component, self.r_s, ny, nx)
-                support = _grow(out, self.r_s, ny, nx)
-                self.smoothed[out] = _smooth(self.raw[support], self.sigma, self.truncate)[_inner(out, support)]
+                out = grow_box(component, self.r_s, (ny, nx))
+                support = grow_box(out, self.r_s, (ny, nx))
+                self.smoothed[out] = _smooth(self.raw[support], self.sigma, self.truncate)[box_within(out, support)]
             else:
                 self.smoothed[component] = self.raw[component]
         return self.smoothed
 
 
-def _area(box: tuple[slice, slice]) -> int:
-    return (box[0].stop - box[0].start) * (box[1].stop - box[1].start)
-
-
-def _split(mask: np.ndarray, box: tuple[slice, slice], margin: int, depth: int = 6) -> list[tuple[slice, slice]]:
+def _split(mask: np.ndarray, box: Box, margin: int, depth: int = 6) -> list[Box]:
     """Cover the pixels within ``margin`` of a True pixel of ``mask`` in ``box`` by boxes: the
     box itself, or, where that costs less, the tight boxes of its two halves (split across the
     longer side), recursively. Cost of a box: its area grown by ``margin`` (what the network
@@ -200,7 +198,7 @@ def _split(mask: np.ndarray, box: tuple[slice, slice], margin: int, depth: int =
     def tight(b):
         # bounding box of (changed pixels grown by margin) within b: the changed pixels in b
         # grown by margin, their bounding box grown by margin, clipped to b
-        around = _grow(b, margin, ny, nx)
+        around = grow_box(b, margin, (ny, nx))
         sub = mask[around]
         rows, cols = np.flatnonzero(sub.any(axis=1)), np.flatnonzero(sub.any(axis=0))
         if rows.size == 0:
@@ -222,32 +220,3 @@ def _split(mask: np.ndarray, box: tuple[slice, slice], margin: int, depth: int =
     if sum(cost(p) for p in parts) >= 0.9 * cost(box):
         return [box]
     return [b for part in parts for b in _split(mask, part, margin, depth - 1)]
-
-
-def _grow(box: tuple[slice, slice], by: int, ny: int, nx: int) -> tuple[slice, slice]:
-    return (slice(max(box[0].start - by, 0), min(box[0].stop + by, ny)),
-            slice(max(box[1].start - by, 0), min(box[1].stop + by, nx)))
-
-
-def _resize(box: tuple[slice, slice], by: int, ny: int, nx: int) -> tuple[slice, slice]:
-    """Grow (by > 0) or shrink (by < 0) a box; sides on the image edge stay there."""
-    if by >= 0:
-        return _grow(box, by, ny, nx)
-    out = []
-    for side, n in zip(box, (ny, nx), strict=True):
-        start = side.start if side.start == 0 else side.start - by
-        stop = side.stop if side.stop == n else side.stop + by
-        out.append(slice(start, max(stop, start)))
-    return tuple(out)
-
-
-def _shift(box: tuple[slice, slice], region: tuple[slice, slice]) -> tuple[slice, slice]:
-    """``box`` given in the coordinates of ``region`` -> image coordinates."""
-    return (slice(box[0].start + region[0].start, box[0].stop + region[0].start),
-            slice(box[1].start + region[1].start, box[1].stop + region[1].start))
-
-
-def _inner(box: tuple[slice, slice], within: tuple[slice, slice]) -> tuple[slice, slice]:
-    """``box`` in the coordinates of the crop ``within``."""
-    return (slice(box[0].start - within[0].start, box[0].stop - within[0].start),
-            slice(box[1].start - within[1].start, box[1].stop - within[1].start))
