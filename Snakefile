@@ -43,6 +43,7 @@ rule all:
         expand("results/figures/ifenn/{run}_force_displacement.png", run=config["ifenn_runs"]),
         "results/tables/accuracy.csv",
         "results/tables/timing.csv",
+        "results/tables/process_zone.csv" if PROCESS_ZONE_PAIRS else [],
         expand("results/figures/paper/{run}_comparison.png", run=config["figures"]["comparisons"]),
         "results/figures/paper/views_3d.png",
         "results/figures/paper/mesh_study.png",

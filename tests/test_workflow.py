@@ -59,6 +59,10 @@ def test_quick_profile_issue5_results(quick_workflow):
         full, zone = (pd.read_csv(results / "ifenn" / name / "history.csv") for name in (run, f"{run}-pz"))
         error = force_curve_error(zone.u.to_numpy(), zone.reaction_force.to_numpy(), full.u.to_numpy(), full.reaction_force.to_numpy())
         assert error < 0.005, (run, error)
+    agreement = pd.read_csv(results / "tables" / "process_zone.csv").set_index("run")
+    assert set(agreement.index) == {f"{run}-pz" for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt")}
+    assert (agreement.force_l2_rel_error < 0.005).all() and (agreement.crack_iou > 0.9).all()
+    assert (agreement.evaluated_fraction_mean < 1).all()  # windows, not the whole image, on average
     table = pd.read_csv(results / "tables" / "speed_accuracy.csv")
     assert {"snt1", "sdnt"} == set(table.scene) and table.is_reference.sum() == 2
     assert table.pareto_wall_s.any() and (table.force_l2_rel_error[~table.is_reference] > 0).all()

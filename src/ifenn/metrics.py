@@ -107,3 +107,45 @@ def timing(fem_history: pd.DataFrame, ifenn_history: pd.DataFrame) -> list[dict]
         row["phase_field_time_vs_fem"] = row["t_phase_field_s"] / fem_row["t_phase_field_s"]
         row["increment_time_vs_fem"] = row["t_increment_s"] / fem_row["t_increment_s"]
     return rows
+
+
+def process_zone_pairs(config: dict) -> dict[str, str]:
+    """Process-zone IFENN run -> its full-image twin: the run of 'ifenn_runs' whose entry is the
+    same but for ``inference`` (resolving to 'full'). Runs without a twin are left out."""
+    def resolved(entry):
+        return entry.get("inference", config["ifenn"]["inference"])
+
+    def rest(entry):
+        return {k: v for k, v in entry.items() if k not in ("inference", "process_zone")}
+
+    runs = config["ifenn_runs"]
+    pairs = {}
+    for zone, entry in runs.items():
+        if resolved(entry) != "process_zone":
+            continue
+        twins = [name for name, other in runs.items() if resolved(other) == "full" and rest(other) == rest(entry)]
+        if twins:
+            pairs[zone] = twins[0]
+    return pairs
+
+
+def process_zone_agreement(zone_dir: str | Path, full_dir: str | Path) -> dict:
+    """How far process-zone IFENN is from full-image IFENN on the same run: force-curve error,
+    peak and final force difference, largest |phi| difference and crack IoU at the last saved
+    increment; the share of the image the network evaluated and the phase-field step's time of
+    each (two runs, so machine load may differ: see the phase-field benchmark for one run)."""
+    zone, full = (pd.read_csv(Path(d) / "history.csv") for d in (zone_dir, full_dir))
+    zone_maps, _ = _fields(Path(zone_dir) / "fields.h5")
+    full_maps, _ = _fields(Path(full_dir) / "fields.h5")
+    last = max(set(zone_maps) & set(full_maps))
+    a, b = zone_maps[last][1], full_maps[last][1]
+    hz, hf = zone[zone.hybrid_active == 1], full[full.hybrid_active == 1]
+    return {
+        "force_l2_rel_error": force_curve_error(zone.u.to_numpy(), zone.reaction_force.to_numpy(),
+                                                full.u.to_numpy(), full.reaction_force.to_numpy()),
+        "peak_force_rel_diff": zone.reaction_force.max() / full.reaction_force.max() - 1.0,
+        "final_force_zone": float(zone.reaction_force.iloc[-1]), "final_force_full": float(full.reaction_force.iloc[-1]),
+        "u_compared": zone_maps[last][0], "phi_max_abs_diff": float(np.abs(a - b).max()), "crack_iou": crack_iou(a, b),
+        "hybrid_increments": len(hz), "evaluated_fraction_mean": float(hz.evaluated_fraction.mean()),
+        "t_phase_field_zone_s": float(hz.t_phase_field_s.mean()), "t_phase_field_full_s": float(hf.t_phase_field_s.mean()),
+    }

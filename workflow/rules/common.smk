@@ -4,6 +4,7 @@ import sys
 
 from ifenn import stability as _stability
 from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
+from ifenn.metrics import process_zone_pairs
 
 try:
     _validated = validate_config(config)
@@ -61,6 +62,8 @@ def speed_accuracy_inputs(wildcards):
     return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}
                   | {f"results/ifenn/{r}/history.csv" for s in runs for r in s.get("ifenn", [])})
 
+
+PROCESS_ZONE_PAIRS = process_zone_pairs(config)
 
 STABILITY_CELLS = _stability.cells(config) if config.get("stability") else {}
 

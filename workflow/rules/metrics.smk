@@ -34,6 +34,21 @@ rule timing_table:
         "../scripts/timing_table.py"
 
 
+rule process_zone_table:
+    input:
+        lambda w: [f"results/ifenn/{r}/{f}" for pair in PROCESS_ZONE_PAIRS.items() for r in pair for f in ("history.csv", "fields.h5")],
+    output:
+        report("results/tables/process_zone.csv", caption="../report/process_zone.rst", category="Tables"),
+    params:
+        pairs=PROCESS_ZONE_PAIRS,
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/tables/process_zone.log",
+    script:
+        "../scripts/process_zone_table.py"
+
+
 rule speed_accuracy:
     input:
         runs=speed_accuracy_inputs,

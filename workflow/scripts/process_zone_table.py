@@ -1,0 +1,10 @@
+"""Adapter: process-zone and full-image IFENN run folders -> ifenn.metrics.process_zone_agreement, one row per pair."""
+import pandas as pd
+
+from ifenn.io import write_csv
+from ifenn.metrics import process_zone_agreement
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+rows = [{"run": zone, "full_run": full, **process_zone_agreement(f"results/ifenn/{zone}", f"results/ifenn/{full}")}
+        for zone, full in snakemake.params.pairs.items()]
+write_csv(snakemake.output[0], pd.DataFrame(rows))
