@@ -164,7 +164,8 @@ def test_slit_faces_separate_and_the_tip_stays_shared(serial_reference):
 
 
 def test_adaptive_steps_reach_the_fine_schedule_peak_with_fewer_increments(quick_config, tmp_path):
-    """Adaptive loading (cut x0.25 and redo when phi moves by > 0.02, grow when quiet) reaches
+    """Adaptive loading (steps aiming at a phi change of 0.01 per increment, redone when phi moves
+    by > 0.02) reaches
     the peak force of a 5x finer fixed schedule within 0.5 %, with fewer increments, where the
     coarse fixed schedule it starts from misses it by more; it ends exactly at u_end."""
     from ifenn.config import fem_run_spec
@@ -176,7 +177,7 @@ def test_adaptive_steps_reach_the_fine_schedule_peak_with_fewer_increments(quick
     adaptive = {k: v for k, v in spec.items() if k != "load"}
     adaptive.update(name="adaptive", save_every=10, adaptive={
         "u_end": 0.015, "step_initial": 1e-3, "step_min": 5e-5, "step_max": 1e-3, "phi_change_max": 0.02,
-        "quiet_fraction": 0.25, "grow": 1.5, "cut": 0.25})
+        "quiet_fraction": 0.5, "grow": 4.0, "cut": 0.25})
     runs = {s["name"]: pd.DataFrame(run_fem(s, mesh, tmp_path / s["name"], progress=False)) for s in (fine, adaptive, spec)}
     peak = {name: h.reaction_force.max() for name, h in runs.items()}
     assert abs(peak["adaptive"] / peak["fine"] - 1) < 0.005
@@ -185,3 +186,16 @@ def test_adaptive_steps_reach_the_fine_schedule_peak_with_fewer_increments(quick
     assert len(runs["adaptive"]) < len(runs["fine"]) and runs["adaptive"].u.iloc[-1] == pytest.approx(0.015)
     assert steps.min() >= 5e-5 * (1 - 1e-9) and steps.max() <= 1e-3 * (1 + 1e-9) and steps.max() > 4 * steps.min()
     assert runs["adaptive"].rejected_steps.sum() > 0  # it did cut and redo increments
+
+
+def test_crack_advance_ignores_the_diffuse_damage():
+    """The adaptive controller's change counts only where phi (before or after) reaches the floor;
+    a phi arriving above it counts in full."""
+    from ifenn.solver import largest_change
+
+    before = np.array([0.02, 0.05, 0.29, 0.6, 0.9])
+    after = np.array([0.06, 0.09, 0.35, 0.61, 0.9])
+    assert largest_change(after, before) == pytest.approx(0.06)
+    assert largest_change(after, before, floor=0.3) == pytest.approx(0.06)  # 0.29 -> 0.35 crosses the floor
+    assert largest_change(after[[0, 1, 3, 4]], before[[0, 1, 3, 4]], floor=0.3) == pytest.approx(0.01)
+    assert largest_change(after[:2], before[:2], floor=0.3) == 0.0

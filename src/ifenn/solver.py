@@ -93,14 +93,27 @@ class FixedLoads:
         pass
 
 
+def largest_change(a: np.ndarray, b: np.ndarray, floor: float = 0.0) -> float:
+    """max |a - b| over the points where a or b is at least ``floor`` (0 when there are none)."""
+    change = np.abs(a - b)
+    if floor > 0.0:
+        change = change[np.maximum(a, b) >= floor]
+    return float(np.max(change, initial=0.0))
+
+
 class AdaptiveLoads:
-    """Adaptive load stepping: the next step is cut by ``cut`` (and the increment redone)
-    when the phase field moved by more than ``phi_change_max`` anywhere (the crack
-    advanced) or the staggered iterations did not converge, and grown by ``grow`` (up to
-    ``step_max``) when phi moved by less than ``quiet_fraction`` x ``phi_change_max``
-    (nothing happens). Steps at ``step_min`` are always accepted; after ``hold_max`` of them
-    in a row (phi creeping without end, e.g. an IFENN crack that never cuts through) the step
-    grows again until phi is quiet. Ends at ``u_end``."""
+    """Adaptive load stepping, a proportional step controller on the largest change of the
+    phase field per increment (the crack's advance), counted where phi (before or after) is at
+    least ``phi_floor``: the crack and its process zone, not the diffuse damage that AT2 spreads
+    everywhere as the load grows (0: everywhere). After each attempt the next step is
+    ``step x quiet_fraction x phi_change_max / change``, clamped to ``[cut, grow]`` x step and
+    to ``[step_min, step_max]``: the step settles where phi moves by ``quiet_fraction x
+    phi_change_max`` per increment, shrinks before the crack runs and grows once phi is quiet.
+    An attempt whose phi moved by more than ``phi_change_max`` (or whose staggered iterations
+    did not converge) is undone and redone with that smaller step, unless it was made at
+    ``step_min`` (always accepted); after ``hold_max`` increments in a row at step_min (phi
+    creeping without end, e.g. an IFENN crack that never cuts through) the step grows by
+    ``grow`` until phi is quiet again. Ends at ``u_end``."""
 
     adaptive = True
 
@@ -111,6 +124,7 @@ class AdaptiveLoads:
         self.phi_change_max, self.quiet = float(settings["phi_change_max"]), float(settings["quiet_fraction"])
         self.step = float(settings["step_initial"])
         self.hold_max = int(settings.get("hold_max", 500))
+        self.phi_floor = float(settings.get("phi_floor", 0.0))
         self.rejected = 0  # rejected attempts since the last accepted increment
         self.held = 0      # consecutive increments accepted at step_min
         self.released = False
@@ -120,24 +134,31 @@ class AdaptiveLoads:
             return None
         return round(min(u_previous + self.step, self.u_end), 15)
 
+    def _proportional(self, phi_change: float, converged: bool) -> float:
+        """The step factor that would have moved phi by quiet_fraction x phi_change_max."""
+        if not converged:
+            return self.cut
+        target = self.quiet * self.phi_change_max
+        return self.grow if phi_change <= target / self.grow else min(max(target / phi_change, self.cut), self.grow)
+
     def judge(self, phi_change: float, converged: bool) -> bool:
         """Accept the attempted increment (True) or not; sets the next step either way."""
-        quiet = phi_change < self.quiet * self.phi_change_max and converged
+        at_min = self.step <= self.step_min * (1 + 1e-9)
+        factor = self._proportional(phi_change, converged)
         if self.released:  # after hold_max increments at step_min: grow until phi is quiet again
-            self.released = not quiet
+            self.released = factor < self.grow
             self.step = min(self.step * self.grow, self.step_max)
             return True
-        too_much = phi_change > self.phi_change_max or not converged
-        if too_much and self.step > self.step_min * (1 + 1e-9):
-            self.step = max(self.step * self.cut, self.step_min)
+        if (phi_change > self.phi_change_max or not converged) and not at_min:
+            self.step = max(self.step * factor, self.step_min)
             self.rejected += 1
             return False
-        self.held = self.held + 1 if self.step <= self.step_min * (1 + 1e-9) else 0
+        self.held = self.held + 1 if at_min else 0
         if self.held >= self.hold_max:
             log.warning("phi kept changing for %d increments at the smallest step: growing the step again", self.held)
             self.released, self.held = True, 0
-        if quiet or self.released:
-            self.step = min(self.step * self.grow, self.step_max)
+            factor = self.grow
+        self.step = min(max(self.step * factor, self.step_min), self.step_max)
         return True
 
     def is_last(self, increment: int, u: float) -> bool:
@@ -329,7 +350,7 @@ class StaggeredRun:
                     break
                 previous = p.phase_field_gp.x.array.copy()
             converged = converged or self.spec["stagger_max_iterations"] == 1
-            if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted_gp), converged):
+            if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted_gp, loads.phi_floor), converged):
                 break
             # rejected: undo the attempt, redo the increment with the controller's smaller step
             rejected_iterations += iteration
@@ -348,8 +369,8 @@ class StaggeredRun:
                 "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **adaptive, **step.timings,
                 **self.row_constants}
 
-    def _max_change(self, a: np.ndarray, b: np.ndarray) -> float:
-        return self.comm.allreduce(float(np.max(np.abs(a - b), initial=0.0)), op=MPI.MAX)
+    def _max_change(self, a: np.ndarray, b: np.ndarray, floor: float = 0.0) -> float:
+        return self.comm.allreduce(largest_change(a, b, floor), op=MPI.MAX)
 
     # ------------------------------------------------------------- outputs
     def _finish(self, wall_s: float) -> None:
