@@ -139,7 +139,7 @@ class AdaptiveLoads:
         if not converged:
             return self.cut
         target = self.quiet * self.phi_change_max
-        return self.grow if phi_change <= target / self.grow else min(max(target / phi_change, self.cut), self.grow)
+        return self.grow if phi_change * self.grow <= target else max(target / phi_change, self.cut)
 
     def judge(self, phi_change: float, converged: bool) -> bool:
         """Accept the attempted increment (True) or not; sets the next step either way."""
