@@ -5,7 +5,7 @@
 SHELL := /bin/bash
 VENV := .venv
 STAMP := $(VENV)/.installed
-APT_PACKAGES := python3-dolfinx-real python3-venv python3-h5py openmpi-bin
+APT_PACKAGES := python3-dolfinx-real python3-venv python3-h5py openmpi-bin g++
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 WHEELS := $(wildcard /opt/wheels)
 ARGS ?=

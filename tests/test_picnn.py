@@ -230,8 +230,9 @@ def test_score_picnn_against_itself_and_the_exact_solution(small_history):
     assert untrained["n_broken"] > 0 and untrained["mae_all"] > 0.05
 
 
+@pytest.mark.parametrize("kernel", ["compiled", "torch"])
 @pytest.mark.parametrize("padding", ["zeros", "replicate", "reflect"])
-def test_orbit_evaluation_is_the_same_network(padding):
+def test_orbit_evaluation_is_the_same_network(padding, kernel):
     """Orbit sums + GEMM (ifenn.orbit) give the convolutions' outputs, on whole images (tiled)
     and on boxes at the corners, edges and inside; also for other kernel and channel sizes."""
     torch.manual_seed(1)
@@ -239,11 +240,26 @@ def test_orbit_evaluation_is_the_same_network(padding):
     history = np.random.default_rng(2).lognormal(1.0, 2.0, (70, 83))
     reference = net.predict(history)
     assert np.abs(reference - 0.5).max() > 0.2  # a network far from trivial
-    evaluator = OrbitEvaluator(net, tile=29)
+    evaluator = OrbitEvaluator(net, tile=29, kernel=kernel)
     np.testing.assert_allclose(evaluator.predict(history), reference, atol=2e-6, rtol=0)
     for box in [(slice(0, 5), slice(0, 9)), (slice(3, 40), slice(70, 83)), (slice(20, 41), slice(30, 52)), (slice(69, 70), slice(8, 9))]:
         np.testing.assert_allclose(evaluator.predict_box(history, box), reference[box], atol=2e-6, rtol=0)
         np.testing.assert_allclose(ConvolutionEvaluator(net).predict_box(history, box), reference[box], atol=2e-6, rtol=0)
     wide = PICNN(channels=(1, 5, 9, 2, 1), kernel_size=7, padding=padding, init_gain=2.0).eval()
-    np.testing.assert_allclose(OrbitEvaluator(wide, tile=16).predict(history[:40, :30]), wide.predict(history[:40, :30]),
+    np.testing.assert_allclose(OrbitEvaluator(wide, tile=16, kernel=kernel).predict(history[:40, :30]), wide.predict(history[:40, :30]),
                                atol=2e-6, rtol=0)
+
+
+def test_compiled_dilation_is_the_square_maximum_filter():
+    """The kernel's mask dilation (process-zone reach) against scipy's maximum filter."""
+    import scipy.ndimage
+
+    net = PICNN().eval()
+    compiled, reference = OrbitEvaluator(net, kernel="compiled"), OrbitEvaluator(net, kernel="torch")
+    mask = np.random.default_rng(7).random((37, 53)) > 0.97
+    mask[0, 0] = mask[-1, 20] = mask[10, -1] = True   # at the edges
+    for r in (1, 2, 5):
+        expected = scipy.ndimage.maximum_filter(mask, size=2 * r + 1, mode="constant", cval=False)
+        np.testing.assert_array_equal(compiled.dilate(mask, r), expected)
+        np.testing.assert_array_equal(reference.dilate(mask, r), expected)
+    assert compiled.dilate(mask, 2).sum() > 4 * mask.sum()

@@ -37,11 +37,11 @@ def _growing_histories(shape=(150, 160), steps=12, seed=0):
 
 
 @pytest.mark.parametrize("sigma", [2.0, None])
-@pytest.mark.parametrize("evaluation", ["orbit", "convolution"])
-def test_windows_equal_full_inference_with_zero_tolerance(net, sigma, evaluation):
-    """Against the network's own convolutions on the whole image, for both evaluators."""
+@pytest.mark.parametrize("kernel", ["compiled", "torch"])
+def test_windows_equal_full_inference_with_zero_tolerance(net, sigma, kernel):
+    """Against the network's own convolutions on the whole image, for both orbit paths."""
     full = FullInference(net.predict, sigma, 4.0)
-    evaluator = OrbitEvaluator(net, tile=64) if evaluation == "orbit" else ConvolutionEvaluator(net)
+    evaluator = OrbitEvaluator(net, tile=64, kernel=kernel)
     zone = ProcessZoneInference(evaluator, sigma, 4.0, tolerance=0.0, refresh_every=1000, full_fraction=0.9)
     fractions = []
     for history in _growing_histories():
@@ -76,6 +76,24 @@ def test_refresh_and_full_fraction_fall_back_to_the_whole_image(model):
     assert everywhere.evaluated_fraction == 1.0
 
 
-def test_process_zone_needs_a_local_predictor():
-    with pytest.raises(ValueError, match="local predictor"):
+@pytest.mark.parametrize("padding", ["zeros", "reflect", "replicate"])
+def test_changes_at_the_image_edge_reach_the_padding(padding):
+    """Inputs rewritten at an edge or a corner change the padding the next layer reads."""
+    torch.manual_seed(4)
+    net = PICNN(padding=padding, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    zone = ProcessZoneInference(OrbitEvaluator(net), None, tolerance=0.0, refresh_every=1000, full_fraction=0.9)
+    history = np.random.default_rng(5).lognormal(1.0, 1.0, (60, 50))
+    zone(history)
+    for box in [(slice(0, 3), slice(10, 20)), (slice(57, 60), slice(47, 50)), (slice(20, 30), slice(0, 2))]:
+        history[box] *= 7.0
+        np.testing.assert_allclose(zone(history), net.predict(history), atol=2e-6, rtol=0)
+        assert zone.evaluated_fraction < 0.5
+
+
+def test_process_zone_needs_the_orbit_evaluation(net):
+    with pytest.raises(ValueError, match="orbit evaluation"):
         ProcessZoneInference(lambda h: h, 2.0)
+    with pytest.raises(ValueError, match="orbit evaluation"):
+        ProcessZoneInference(ConvolutionEvaluator(net), 2.0)
+    with pytest.raises(ValueError, match="circular"):
+        ProcessZoneInference(OrbitEvaluator(PICNN(padding="circular")), 2.0)

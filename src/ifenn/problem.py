@@ -211,8 +211,8 @@ class FractureProblem:
     # ------------------------------------------------------------------ pixels
     def pixels_from_gauss_points(self, function) -> np.ndarray | None:
         """Gauss-point field -> (ny_px, nx_px) pixel image on rank 0 (None elsewhere)."""
-        if self.comm.size == 1:
-            return function.x.array[self.q_dof_of_pixel].reshape(self.pixels.shape)
+        if self.comm.size == 1:   # take(mode="clip"): the indices are valid, and it skips their check
+            return np.take(function.x.array, self.q_dof_of_pixel, mode="clip").reshape(self.pixels.shape)
         index = self.pixel_of_q_dof[self.owned_q_dofs]
         values = function.x.array[self.owned_q_dofs]
         if self.comm.size > 1:
@@ -227,7 +227,7 @@ class FractureProblem:
         """Pixel image (given on rank 0) -> Gauss-point field on every rank (incl. ghosts)."""
         if self.comm.size > 1:
             image = self.comm.bcast(image, root=0)
-        function.x.array[:] = image.ravel()[self.pixel_of_q_dof]
+        np.take(np.ravel(image), self.pixel_of_q_dof, out=function.x.array, mode="clip")
 
 
 def _distance_to_segment(points: np.ndarray, start, end) -> np.ndarray:

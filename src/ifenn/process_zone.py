@@ -6,27 +6,28 @@ phi = G_sigma * N(H_c), where N is a local operator (the PICNN: an output pixel 
 the inputs within ``r_net`` pixels, a square window, 8 for the default network) and G_sigma
 the Gaussian filter (radius ``r_s = round(truncate sigma)``, 8 at sigma 2).
 
-Process-zone inference keeps the last network output and smoothed image and, after one
-full evaluation, re-evaluates only boxes around the pixels whose network input changed:
-an output of N can only change within r_net of a changed input, so N is evaluated on the
-bounding boxes of the connected components of (changed pixels grown by r_net), each from
-its inputs within r_net (an evaluator's ``predict_box``: exact wherever the box lies, the
-image edge's padding included). The filter is linear and local, so the smoothed image
-changes only within r_s of those boxes and is recomputed there from the stored network
+Process-zone inference keeps every layer's activations of the last evaluation
+(:class:`ifenn.orbit.NetworkState`) and, after one full evaluation, rewrites only the inputs
+of pixels whose capped H changed and recomputes what depends on them: layer 1 within the
+kernel radius r of those pixels, layer 2 within r of that, and so on, so the output within
+r_net = (layers) r of them (a square window, 8 for the default network). The changed
+pixels are grouped into crops that lie more than 2 r_net apart, carried through the layers
+one crop at a time. The filter is linear and local, so the smoothed image changes only
+within r_s of the recomputed outputs and is recomputed there from the stored network
 output. With ``tolerance = 0`` this reproduces full inference to round-off.
 
 Error bound. Changes are measured in the units of the output: the local phase field
 phi_loc = 2 H_c / (Gc/lc + 2 H_c), the solution of the pixel equation for uniform H, which
 the network reproduces where H varies slowly; it is insensitive to H far below Gc/(2 lc)
 (the far field) and above it (the crack). A pixel counts as changed once its phi_loc moved
-by more than ``tolerance`` from its reference, the value it had when every output that
-depends on it was last recomputed (pixels read but not reset keep their older reference, so
-they were within ``tolerance`` of it when read). Hence every input
-behind every stored output differs from the current one by at most 2 x tolerance in phi_loc,
-at every step (inputs that drift further are re-evaluated that step); for the exact pixel
+by more than ``tolerance`` from its reference, the value it had when its input was last
+rewritten (then every activation that depends on it was recomputed from the new value; a
+pixel not rewritten keeps its older input, which is within ``tolerance`` of its reference).
+Hence every input behind every stored output differs from the current one by at most
+2 x tolerance in phi_loc, at every step (inputs that drift further are re-evaluated that step); for the exact pixel
 equation, whose solution operator is monotone, the stored phi is then within about
 2 x tolerance of the current one. ``refresh_every`` re-evaluates the whole image as a guard,
-and when the boxes would cover more than ``full_fraction`` of the image the whole image is
+and when the crops would cover more than ``full_fraction`` of the image the whole image is
 evaluated instead (it is then cheaper).
 """
 
@@ -37,7 +38,7 @@ import time
 import numpy as np
 import scipy.ndimage
 
-from .pixels import Box, box_area, box_within, grow_box
+from .pixels import box_area, box_within, grow_box
 
 
 def _smoothing_radius(sigma: float | None, truncate: float) -> int:
@@ -69,25 +70,30 @@ class FullInference:
 
 
 class ProcessZoneInference:
-    """Evaluate a local network only in boxes around pixels whose input changed.
+    """Carry the changes of the network input through the network only where they reach.
 
-    ``evaluator``: a PICNN evaluator (:mod:`ifenn.orbit`: ``predict``, ``predict_box``,
-    ``receptive_radius``).
+    ``evaluator``: the PICNN's orbit evaluator (:class:`ifenn.orbit.OrbitEvaluator`: its
+    ``network_state`` and ``receptive_radius``).
     """
 
     name = "process_zone"
 
     def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = 1e-3,
-                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0):
-        if not hasattr(evaluator, "predict_box"):
-            raise ValueError("process-zone inference needs a local predictor (the PICNN), not a global pixel solve")
+                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0, refresh_radius: int | None = None):
+        if not hasattr(evaluator, "network_state"):
+            raise ValueError("process-zone inference needs the local PICNN in its orbit evaluation (ifenn evaluation: orbit), "
+                             "not a global pixel solve or the convolution path")
+        if evaluator.padding == "circular":
+            raise ValueError("process-zone inference needs a network that pads by zeros, replicate or reflect: 'circular' "
+                             "padding makes the pixels at one edge depend on those at the opposite edge")
         self.evaluator, self.sigma, self.truncate = evaluator, sigma, truncate
         self.tolerance, self.refresh_every, self.full_fraction = tolerance, refresh_every, full_fraction
         self.local_scale = local_scale  # Gc / lc, N/mm^2
         self.r_net = int(evaluator.receptive_radius)
         self.r_s = _smoothing_radius(sigma, truncate)
+        self.refresh_radius = self.r_net if refresh_radius is None else int(refresh_radius)
         self.reference = None   # phi_loc of each pixel's input when its drift last restarted
-        self.raw = None         # stored network output
+        self.state = None       # the network's activations, layer by layer (ifenn.orbit.NetworkState)
         self.smoothed = None    # stored smoothed output
         self.steps_since_full = 0
         self.t_network = 0.0
@@ -103,8 +109,8 @@ class ProcessZoneInference:
             history = self.local_scale * phi_loc / (2.0 * (1.0 - phi_loc))
         return np.where(phi_loc >= 1.0, np.inf, np.where(phi_loc <= 0.0, -np.inf, history))
 
-    def _set_reference(self, capped: np.ndarray, where=None, mask=None) -> None:
-        """Restart the drift of the pixels ``where`` (and ``mask`` within it): reference phi_loc
+    def _set_reference(self, capped: np.ndarray, where=None) -> None:
+        """Restart the drift of the pixels ``where`` (an index of the image): reference phi_loc
         and the H interval within which phi_loc stays within the tolerance of it."""
         where = (slice(None), slice(None)) if where is None else where
         current = capped[where]
@@ -112,24 +118,28 @@ class ProcessZoneInference:
         # the current value always lies inside its interval (round-off of the inverse aside)
         upper = np.maximum(self._history_at(local + self.tolerance), current)
         lower = np.minimum(self._history_at(local - self.tolerance), current)
-        if mask is not None:
-            local, upper, lower = (np.where(mask, new, old[where]) for new, old in
-                                   ((local, self.reference), (upper, self.upper), (lower, self.lower)))
         self.reference[where], self.upper[where], self.lower[where] = local, upper, lower
 
     def _full(self, capped: np.ndarray) -> np.ndarray:
         started = time.perf_counter()
-        self.raw = self.evaluator.predict(capped)
+        if self.state is None or self.state.shape != capped.shape:
+            self.state = self.evaluator.network_state(capped.shape)
+        self.state.full(capped)
         self.t_network = time.perf_counter() - started
-        self.smoothed = _smooth(self.raw, self.sigma, self.truncate)
+        self.smoothed = _smooth(self.raw.astype(np.float64), self.sigma, self.truncate)
         self.reference, self.upper, self.lower = (np.empty_like(capped, dtype=float) for _ in range(3))
         self._set_reference(capped)
         self.steps_since_full = 0
         self.evaluated_fraction = 1.0
         return self.smoothed
 
+    @property
+    def raw(self) -> np.ndarray | None:
+        """The stored network output (float32)."""
+        return None if self.state is None else self.state.output
+
     def __call__(self, capped: np.ndarray) -> np.ndarray:
-        if self.raw is None or self.raw.shape != capped.shape or self.steps_since_full + 1 >= self.refresh_every:
+        if self.state is None or self.state.shape != capped.shape or self.steps_since_full + 1 >= self.refresh_every:
             return self._full(capped)
         self.steps_since_full += 1
         # |phi_loc - reference| > tolerance, as H outside the interval (phi_loc is monotone)
@@ -140,83 +150,48 @@ class ProcessZoneInference:
             return self.smoothed
         ny, nx = capped.shape
         R = self.r_net
-        # The outputs that can change: the changed pixels grown by R (a square, the receptive
-        # field of the convolutions). Group the changed pixels on blocks of R pixels (pixels
-        # whose squares overlap or nearly so end up together); each group's box is the bounding
-        # box of its pixels grown by R, split where that saves work (_split).
+        # Group the changed pixels on blocks of R pixels: groups whose pixels lie within about
+        # 5 R of each other end up together, so what one group's change reaches (R around it)
+        # never meets another's and each is carried through the network on its own crop.
         block = max(R, 1)
         coarse = np.zeros((-(-ny // block), -(-nx // block)), dtype=bool)
         coarse[rows // block, cols // block] = True
         labels, n_groups = scipy.ndimage.label(scipy.ndimage.maximum_filter(coarse, size=5), structure=np.ones((3, 3), int))
         group_of = labels[rows // block, cols // block]
-        components = []
-        for group in range(1, n_groups + 1):
-            members = group_of == group
-            if members.any():
+        order = np.argsort(group_of, kind="stable")
+        bounds = np.searchsorted(group_of[order], np.arange(1, n_groups + 2))
+        groups = []
+        for g in range(n_groups):
+            members = order[bounds[g]:bounds[g + 1]]
+            if members.size:
                 r, c = rows[members], cols[members]
-                components.append(grow_box((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), R, (ny, nx)))
-        parts = [_split(changed, component, R) for component in components]
-        evaluated = sum(box_area(grow_box(box, R, (ny, nx))) for boxes in parts for box in boxes)  # inputs read
-        if evaluated > self.full_fraction * ny * nx:
+                groups.append((r, c, grow_box((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), R + self.refresh_radius, (ny, nx))))
+        if sum(box_area(crop) for _, _, crop in groups) > self.full_fraction * ny * nx:
             return self._full(capped)
         started = time.perf_counter()
-        for boxes in parts:
-            for box in boxes:
-                self.raw[box] = self.evaluator.predict_box(capped, box)
+        recomputed = 0
+        for r, c, crop in groups:
+            mask = np.zeros((crop[0].stop - crop[0].start, crop[1].stop - crop[1].start), dtype=bool)
+            mask[r - crop[0].start, c - crop[1].start] = True
+            if self.refresh_radius:
+                mask = self.evaluator.dilate(mask, self.refresh_radius)
+                r, c = np.nonzero(mask)
+                r, c = r + crop[0].start, c + crop[1].start
+            self.state.set_inputs(capped, r, c)
+            recomputed += int(np.count_nonzero(self.state.propagate(mask, (crop[0].start, crop[1].start))))
+            # every output that depends on a rewritten input was just recomputed from its
+            # current value: those inputs restart their drift
+            self._set_reference(capped, (r, c))
         self.t_network = time.perf_counter() - started
-        self.evaluated_fraction = evaluated / (ny * nx)
-        for component, boxes in zip(components, parts, strict=True):
-            # every output that depends on an input covered by the boxes was just computed from
-            # its current value: those inputs restart their drift (outside the image counts as covered)
-            region = grow_box(component, R, (ny, nx))
-            covered = np.zeros((region[0].stop - region[0].start, region[1].stop - region[1].start), dtype=bool)
-            for box in boxes:
-                covered[box_within(box, region)] = True
-            on_edge = ((region[0].start == 0, region[0].stop == ny), (region[1].start == 0, region[1].stop == nx))
-            fresh = scipy.ndimage.minimum_filter(np.pad(covered, R, constant_values=on_edge), size=2 * R + 1)[R:-R, R:-R]
-            self._set_reference(capped, region, fresh)
-            # the filter is linear and local: the smoothed image changes within r_s of the boxes
+        self.evaluated_fraction = recomputed / (ny * nx)
+        # the filter is linear and local: the smoothed image changes within r_s of the crops
+        for _, _, crop in groups:
             if self.sigma:
-                out = grow_box(component, self.r_s, (ny, nx))
+                out = grow_box(crop, self.r_s, (ny, nx))
                 support = grow_box(out, self.r_s, (ny, nx))
-                self.smoothed[out] = _smooth(self.raw[support], self.sigma, self.truncate)[box_within(out, support)]
+                self.smoothed[out] = _smooth(self.raw[support].astype(np.float64), self.sigma, self.truncate)[box_within(out, support)]
             else:
-                self.smoothed[component] = self.raw[component]
+                self.smoothed[crop] = self.raw[crop]
         return self.smoothed
 
 
-def _split(mask: np.ndarray, box: Box, margin: int, depth: int = 6) -> list[Box]:
-    """Cover the pixels within ``margin`` of a True pixel of ``mask`` in ``box`` by boxes: the
-    box itself, or, where that costs less, the tight boxes of its two halves (split across the
-    longer side), recursively. Cost of a box: its area grown by ``margin`` (what the network
-    reads for it)."""
-    def cost(b):
-        return (b[0].stop - b[0].start + 2 * margin) * (b[1].stop - b[1].start + 2 * margin)
-
-    ny, nx = mask.shape
-
-    def tight(b):
-        # bounding box of (changed pixels grown by margin) within b: the changed pixels in b
-        # grown by margin, their bounding box grown by margin, clipped to b
-        around = grow_box(b, margin, (ny, nx))
-        sub = mask[around]
-        rows, cols = np.flatnonzero(sub.any(axis=1)), np.flatnonzero(sub.any(axis=0))
-        if rows.size == 0:
-            return None
-        return (slice(max(around[0].start + rows[0] - margin, b[0].start), min(around[0].start + rows[-1] + 1 + margin, b[0].stop)),
-                slice(max(around[1].start + cols[0] - margin, b[1].start), min(around[1].start + cols[-1] + 1 + margin, b[1].stop)))
-
-    box = tight(box)
-    if box is None:
-        return []
-    height, width = box[0].stop - box[0].start, box[1].stop - box[1].start
-    if depth == 0 or max(height, width) < 4 * margin:
-        return [box]
-    axis = 0 if height >= width else 1
-    middle = box[axis].start + (box[axis].stop - box[axis].start) // 2
-    halves = [list(box), list(box)]
-    halves[0][axis], halves[1][axis] = slice(box[axis].start, middle), slice(middle, box[axis].stop)
-    parts = [t for t in (tight(tuple(h)) for h in halves) if t is not None]
-    if sum(cost(p) for p in parts) >= 0.9 * cost(box):
-        return [box]
-    return [b for part in parts for b in _split(mask, part, margin, depth - 1)]
