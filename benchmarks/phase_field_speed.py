@@ -45,7 +45,7 @@ def main() -> int:
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
         print("\nPhase-field step, seconds per increment (mean over the increments after the switch-over):")
-        print(table[["run", "pixels", "method", "increments", "t_displacement_s", "t_phase_field_s", "t_phase_field_median_s",
+        print(table[["run", "pixels", "method", "network_kernel", "increments", "t_displacement_s", "t_phase_field_s", "t_phase_field_median_s",
                      "evaluated_fraction", "phase_field_speedup_vs_fem", "final_force"]].to_string(index=False))
     return 0
 

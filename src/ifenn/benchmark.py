@@ -3,8 +3,9 @@ in the same process: snt1/snt2/snt3 (the mesh study's runs, schedule II), a fixe
 increments of crack propagation from each FEM run's switch-over state.
 
 IFENN methods: the full image with the network's convolutions (torch conv2d, the paper's
-step), the full image with the same network evaluated as orbit sums + GEMM (ifenn.orbit),
-and the process zone (orbit evaluation).
+step), the full image with the same network evaluated as orbit sums + products (ifenn.orbit,
+in the compiled kernel where it builds: the column network_kernel says which ran), and the
+process zone (orbit evaluation).
 
 For each scene and method the run restarts from the same FEM state and takes the same loads;
 only the phase-field step differs. t_phase_field_s is everything that step does: for FEM the
@@ -39,16 +40,19 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
         spec.update(inference=METHODS[method][0], evaluation=METHODS[method][1])
     domain = read_dolfinx_mesh(mesh_path)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
+    kernel = ""
     if method == "fem":
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
     else:
-        step = PixelPhaseField(problem, make_inference(spec, model_path, problem.pixels.h_px), spec["predictor"],
-                               spec["history_cap"], spec["irreversible"])
+        inference = make_inference(spec, model_path, problem.pixels.h_px)
+        evaluator = getattr(inference, "evaluator", None) or getattr(inference.predictor, "__self__", None)
+        kernel = getattr(evaluator, "kernel", "")
+        step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,
                        row_constants={"hybrid_active": int(method != "fem")})
     history = pd.DataFrame(run.run())
-    return history[history.increment > switch]
+    return history[history.increment > switch].assign(network_kernel=kernel)
 
 
 def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | Path, increments: int = 40,
@@ -68,6 +72,7 @@ def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | P
                 history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp))
                 nx, ny = spec["scene"]["elements"]
                 rows.append({"run": spec["name"], "elements": f"{nx}x{ny}", "pixels": f"{2 * nx}x{2 * ny}", "method": method,
+                             "network_kernel": history.network_kernel.iloc[0],
                              "increments": len(history),
                              "t_displacement_s": history.t_displacement_s.mean(),
                              "t_phase_field_s": history.t_phase_field_s.mean(),

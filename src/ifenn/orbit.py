@@ -73,6 +73,7 @@ class OrbitEvaluator:
             self.library = orbit_kernel.load() if orbit_kernel.supports(model.kernel_size) else None
             if self.library is None and kernel == "compiled":
                 raise RuntimeError(f"the compiled orbit kernel is not available for kernel size {model.kernel_size} here")
+        self.kernel = "compiled" if self.library is not None else "torch"   # what runs the layers
         with torch.no_grad():   # (out, n_free in) weights of every layer, float32, for the kernel
             self.kernel_weights = [np.ascontiguousarray(layer.free_weight.detach().permute(0, 2, 1).reshape(layer.out_ch, -1)
                                                         .numpy(), dtype=np.float32) for layer in model.layers]
@@ -309,6 +310,8 @@ class ConvolutionEvaluator:
     """The same interface on the network's own convolutions (torch conv2d, as published):
     a box is evaluated on its inputs grown by the receptive radius, padded on every side,
     and the outputs it needs (exact: those at least that radius inside) are kept."""
+
+    kernel = "conv2d"
 
     def __init__(self, model):
         self.model = model
