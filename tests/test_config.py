@@ -37,6 +37,8 @@ def test_schedule_values():
         (lambda c: c["schedules"]["adaptive"]["adaptive"].update(step_min=1.0e-3), ["schedules.adaptive.adaptive", "step_min <= step_initial"]),
         (lambda c: c["stability"].update(scene="nowhere"), ["stability.scene", "'nowhere'", "allowed"]),
         (lambda c: c["speed_accuracy"]["snt1"].update(reference="snt9"), ["speed_accuracy.snt1.reference", "'snt9'"]),
+        (lambda c: c["ifenn_runs"]["snt1-I-pz"].update(evaluation="convolution"),
+         ["ifenn_runs.snt1-I-pz.inference", "process_zone needs", "'convolution'"]),
     ],
 )
 def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):

@@ -201,6 +201,10 @@ def _semantic_problems(config: dict) -> list[str]:
             problems.append(
                 f"config key 'ifenn_runs.{name}.fem_run': '{run['fem_run']}' is not a FEM run; allowed: {sorted(config['fem_runs'])}"
             )
+        setting = {key: run.get(key, config["ifenn"].get(key)) for key in ("inference", "predictor", "evaluation")}
+        if setting["inference"] == "process_zone" and (setting["predictor"] != "picnn" or setting["evaluation"] != "orbit"):
+            problems.append(f"config key 'ifenn_runs.{name}.inference': process_zone needs predictor 'picnn' with evaluation "
+                            f"'orbit', got predictor '{setting['predictor']}' and evaluation '{setting['evaluation']}'")
     return problems
 
 
