@@ -263,3 +263,26 @@ def test_compiled_dilation_is_the_square_maximum_filter():
         np.testing.assert_array_equal(compiled.dilate(mask, r), expected)
         np.testing.assert_array_equal(reference.dilate(mask, r), expected)
     assert compiled.dilate(mask, 2).sum() > 4 * mask.sum()
+
+
+def test_kernel_can_be_turned_off_and_is_rebuilt_where_the_cache_is(monkeypatch, tmp_path):
+    """IFENN_KERNEL=0 gives the torch path (and "compiled" then says it is not there); a new
+    cache directory gets its own build, which computes what the torch path computes."""
+    from ifenn import orbit_kernel
+
+    net = PICNN(init_gain=2.0).eval()
+    history = np.random.default_rng(3).lognormal(1.0, 2.0, (20, 30))
+    try:
+        monkeypatch.setenv("IFENN_KERNEL", "0")
+        orbit_kernel.load.cache_clear()
+        assert OrbitEvaluator(net).kernel == "torch"
+        with pytest.raises(RuntimeError, match="not available"):
+            OrbitEvaluator(net, kernel="compiled")
+        monkeypatch.setenv("IFENN_KERNEL", "1")
+        monkeypatch.setenv("IFENN_KERNEL_CACHE", str(tmp_path))
+        orbit_kernel.load.cache_clear()
+        evaluator = OrbitEvaluator(net)
+        assert evaluator.kernel == "compiled" and len(list(tmp_path.glob("orbit_kernel-*.so"))) == 1
+        np.testing.assert_allclose(evaluator.predict(history), OrbitEvaluator(net, kernel="torch").predict(history), atol=2e-6, rtol=0)
+    finally:
+        orbit_kernel.load.cache_clear()

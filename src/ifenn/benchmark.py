@@ -44,7 +44,7 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     if method == "fem":
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
     else:
-        inference = make_inference(spec, model_path, problem.pixels.h_px)
+        inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
         evaluator = getattr(inference, "evaluator", None) or getattr(inference.predictor, "__self__", None)
         kernel = getattr(evaluator, "kernel", "")
         step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])

@@ -32,8 +32,9 @@ def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
     return switch, state, rows
 
 
-def make_inference(spec: dict, model_path: str | Path | None, h_px: float):
-    """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image."""
+def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
+    """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image.
+    ``shape``: the image's, when known (what the network keeps is then allocated now)."""
     from .process_zone import FullInference, ProcessZoneInference
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
@@ -46,7 +47,9 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float):
         if spec.get("inference", "full") == "process_zone":
             zone = spec["process_zone"]
             return ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
-                                        local_scale=spec["material"]["Gc"] / spec["material"]["lc"])
+                                        local_scale=spec["material"]["Gc"] / spec["material"]["lc"], shape=shape)
+        if shape is not None and hasattr(evaluator, "prepare"):
+            evaluator.prepare(shape)
         return FullInference(evaluator.predict, sigma, truncate)
     if spec["predictor"] == "exact_pixel":
         from .picnn import solve_pixel_equation
@@ -72,7 +75,7 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
         raise RuntimeError(f"FEM run {fem_dir} never reached phi_max > {spec['switch_phi_max']}: nothing for IFENN to take over")
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    inference = make_inference(spec, model_path, problem.pixels.h_px) if comm.rank == 0 else None
+    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
     step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1})

@@ -185,6 +185,12 @@ class OrbitEvaluator:
     def network_state(self, shape: tuple[int, int]) -> NetworkState:
         return NetworkState(self, shape)
 
+    def prepare(self, shape: tuple[int, int]) -> None:
+        """Allocate what ``predict`` of a ``shape`` image uses, ahead of the first call (as the
+        FEM step builds its matrix ahead of the first solve)."""
+        if self.library is not None and (self._scratch is None or self._scratch.shape != tuple(shape)):
+            self._scratch = NetworkState(self, shape)
+
     def predict_box(self, history: np.ndarray, box: Box) -> np.ndarray:
         """phi (float64) on ``box`` of the (ny, nx) history map (N/mm^2), from its inputs
         within the receptive radius only."""
@@ -205,8 +211,7 @@ class OrbitEvaluator:
         if history.ndim == 3:
             return np.stack([self.predict(h) for h in history])
         if self.library is not None:
-            if self._scratch is None or self._scratch.shape != history.shape:
-                self._scratch = NetworkState(self, history.shape)
+            self.prepare(history.shape)
             return self._scratch.full(history).astype(np.float64)
         ny, nx = history.shape
         phi = np.empty((ny, nx))
@@ -244,7 +249,8 @@ class NetworkState:
         self.layers = []   # padded float32 images, one per layer boundary (input first)
         for channels in evaluator.model.channels:
             size = channels * (ny + 2 * r) * (nx + 2 * r)
-            self.layers.append(np.zeros(size + orbit_kernel.SLACK, dtype=np.float32)[:size].reshape(channels, ny + 2 * r, nx + 2 * r))
+            # np.full writes every page now (np.zeros would defer that to the first evaluation)
+            self.layers.append(np.full(size + orbit_kernel.SLACK, 0.0, dtype=np.float32)[:size].reshape(channels, ny + 2 * r, nx + 2 * r))
         padding = evaluator.padding
         self._padding = None if padding == "zeros" else (_padding_index(ny, r, padding) + r, _padding_index(nx, r, padding) + r)
         # the padded rows (columns) before and after the image, and the halves of each

@@ -79,7 +79,8 @@ class ProcessZoneInference:
     name = "process_zone"
 
     def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = 1e-3,
-                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0, refresh_radius: int | None = None):
+                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0, refresh_radius: int | None = None,
+                 shape: tuple[int, int] | None = None):
         if not hasattr(evaluator, "network_state"):
             raise ValueError("process-zone inference needs the local PICNN in its orbit evaluation (ifenn evaluation: orbit), "
                              "not a global pixel solve or the convolution path")
@@ -93,7 +94,9 @@ class ProcessZoneInference:
         self.r_s = _smoothing_radius(sigma, truncate)
         self.refresh_radius = self.r_net if refresh_radius is None else int(refresh_radius)
         self.reference = None   # phi_loc of each pixel's input when its drift last restarted
-        self.state = None       # the network's activations, layer by layer (ifenn.orbit.NetworkState)
+        # the network's activations, layer by layer (ifenn.orbit.NetworkState); allocated here
+        # when the image ``shape`` is known, as the FEM step builds its matrix ahead of time
+        self.state = None if shape is None else evaluator.network_state(shape)
         self.smoothed = None    # stored smoothed output
         self.steps_since_full = 0
         self.t_network = 0.0
@@ -139,7 +142,7 @@ class ProcessZoneInference:
         return None if self.state is None else self.state.output
 
     def __call__(self, capped: np.ndarray) -> np.ndarray:
-        if self.state is None or self.state.shape != capped.shape or self.steps_since_full + 1 >= self.refresh_every:
+        if self.smoothed is None or self.state.shape != capped.shape or self.steps_since_full + 1 >= self.refresh_every:
             return self._full(capped)
         self.steps_since_full += 1
         # |phi_loc - reference| > tolerance, as H outside the interval (phi_loc is monotone)
