@@ -153,16 +153,21 @@ class OrbitEvaluator:
     def apply_layer(self, i: int, x: np.ndarray, y: np.ndarray, mask: np.ndarray, origin: tuple[int, int]) -> None:
         """Layer i from the padded activations x (c_in, ny + 2r, nx + 2r) into y (c_out, same):
         y is recomputed at the pixels of ``mask`` (bool, image pixels from ``origin`` = (row,
-        column) on), or, on the torch path, on their bounding box; padding is not touched."""
+        column) on), or, on the torch path, on their bounding box; padding is not touched.
+        x and y are layer buffers of a :class:`NetworkState` (float32, contiguous, with the slack
+        the compiled kernel reads past a row's end)."""
         r, (y0, x0) = self.radius, origin
         if self.library is not None:
+            if not all(a.dtype == np.float32 and a.flags.c_contiguous for a in (x, y)) or x.shape[1:] != y.shape[1:]:
+                raise ValueError("apply_layer needs two float32 layer buffers of one NetworkState")
             mask = np.ascontiguousarray(mask, dtype=bool)
             ny, nx = x.shape[1] - 2 * r, x.shape[2] - 2 * r
             code = self.library.ifenn_orbit_layer(x.ctypes.data, x.shape[0], ny, nx, r, y.ctypes.data, y.shape[0],
                                                   self.kernel_weights[i].ctypes.data, mask.ctypes.data, mask.shape[0],
                                                   mask.shape[1], y0, x0,
                                                   orbit_kernel.ACTIVATIONS["tanh" if i < len(self.layers) - 1 else "sigmoid"])
-            assert code == 0, "kernel radius not compiled"
+            if code != 0:
+                raise RuntimeError(f"the compiled kernel has no instance for kernel radius {r}")
             return
         rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
         if rows.size == 0:
