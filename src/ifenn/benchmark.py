@@ -45,8 +45,7 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
     else:
         inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
-        evaluator = getattr(inference, "evaluator", None) or getattr(inference.predictor, "__self__", None)
-        kernel = getattr(evaluator, "kernel", "")
+        kernel = inference.kernel
         step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,

@@ -48,9 +48,9 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             zone = spec["process_zone"]
             return ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
                                         local_scale=spec["material"]["Gc"] / spec["material"]["lc"], shape=shape)
-        if shape is not None and hasattr(evaluator, "prepare"):
+        if shape is not None:
             evaluator.prepare(shape)
-        return FullInference(evaluator.predict, sigma, truncate)
+        return FullInference(evaluator.predict, sigma, truncate, evaluator.kernel)
     if spec["predictor"] == "exact_pixel":
         from .picnn import solve_pixel_equation
 

@@ -132,7 +132,7 @@ def process_zone_pairs(config: dict) -> dict[str, str]:
 def process_zone_agreement(zone_dir: str | Path, full_dir: str | Path) -> dict:
     """How far process-zone IFENN is from full-image IFENN on the same run: force-curve error,
     peak and final force difference, largest |phi| difference and crack IoU at the last saved
-    increment; the share of the image the network evaluated and the phase-field step's time of
+    increment; the share of the image whose network output was computed anew and the phase-field step's time of
     each (two runs, so machine load may differ: see the phase-field benchmark for one run)."""
     zone, full = (pd.read_csv(Path(d) / "history.csv") for d in (zone_dir, full_dir))
     zone_maps, _ = _fields(Path(zone_dir) / "fields.h5")

@@ -331,6 +331,9 @@ class ConvolutionEvaluator:
     def predict(self, history: np.ndarray) -> np.ndarray:
         return self.model.predict(history)
 
+    def prepare(self, shape: tuple[int, int]) -> None:
+        """Nothing to allocate ahead: conv2d allocates per call."""
+
     def predict_box(self, history: np.ndarray, box: Box) -> np.ndarray:
         crop = grow_box(box, self.receptive_radius, history.shape)
         return self.model.predict(history[crop])[box_within(box, crop)]

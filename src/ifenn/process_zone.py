@@ -8,11 +8,12 @@ the Gaussian filter (radius ``r_s = round(truncate sigma)``, 8 at sigma 2).
 
 Process-zone inference keeps every layer's activations of the last evaluation
 (:class:`ifenn.orbit.NetworkState`) and, after one full evaluation, rewrites only the inputs
-of pixels whose capped H changed and recomputes what depends on them: layer 1 within the
-kernel radius r of those pixels, layer 2 within r of that, and so on, so the output within
-r_net = (layers) r of them (a square window, 8 for the default network). The changed
-pixels are grouped into crops that lie more than 2 r_net apart, carried through the layers
-one crop at a time. The filter is linear and local, so the smoothed image changes only
+within r_net of pixels whose capped H changed (r_net = (layers) r, the network's reach, 8 for
+the default network; rewriting only the changed pixels themselves left their neighbours,
+drifting just under the tolerance, stale next to the crack tip) and recomputes what depends on
+them: layer 1 within the kernel radius r of those pixels, layer 2 within r of that, and so on,
+so the output within r_net of them. The changed pixels are grouped into crops that lie more
+than 4 r_net apart, carried through the layers one crop at a time. The filter is linear and local, so the smoothed image changes only
 within r_s of the recomputed outputs and is recomputed there from the stored network
 output. With ``tolerance = 0`` this reproduces full inference to round-off.
 
@@ -57,8 +58,9 @@ class FullInference:
 
     name = "full"
 
-    def __init__(self, predictor, sigma: float | None, truncate: float = 4.0):
+    def __init__(self, predictor, sigma: float | None, truncate: float = 4.0, kernel: str = ""):
         self.predictor, self.sigma, self.truncate = predictor, sigma, truncate
+        self.kernel = kernel   # what evaluates the network, for the record ("" for other predictors)
         self.t_network = 0.0
         self.evaluated_fraction = 1.0
 
@@ -79,7 +81,7 @@ class ProcessZoneInference:
     name = "process_zone"
 
     def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = 1e-3,
-                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0, refresh_radius: int | None = None,
+                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0,
                  shape: tuple[int, int] | None = None):
         if not hasattr(evaluator, "network_state"):
             raise ValueError("process-zone inference needs the local PICNN in its orbit evaluation (ifenn evaluation: orbit), "
@@ -88,11 +90,11 @@ class ProcessZoneInference:
             raise ValueError("process-zone inference needs a network that pads by zeros, replicate or reflect: 'circular' "
                              "padding makes the pixels at one edge depend on those at the opposite edge")
         self.evaluator, self.sigma, self.truncate = evaluator, sigma, truncate
+        self.kernel = evaluator.kernel
         self.tolerance, self.refresh_every, self.full_fraction = tolerance, refresh_every, full_fraction
         self.local_scale = local_scale  # Gc / lc, N/mm^2
         self.r_net = int(evaluator.receptive_radius)
         self.r_s = _smoothing_radius(sigma, truncate)
-        self.refresh_radius = self.r_net if refresh_radius is None else int(refresh_radius)
         self.reference = None   # phi_loc of each pixel's input when its drift last restarted
         # the network's activations, layer by layer (ifenn.orbit.NetworkState); allocated here
         # when the image ``shape`` is known, as the FEM step builds its matrix ahead of time
@@ -154,8 +156,8 @@ class ProcessZoneInference:
         ny, nx = capped.shape
         R = self.r_net
         # Group the changed pixels on blocks of R pixels: groups whose pixels lie within about
-        # 5 R of each other end up together, so what one group's change reaches (R around it)
-        # never meets another's and each is carried through the network on its own crop.
+        # 5 R of each other end up together, so what one group's change reaches (2 R around it:
+        # the inputs rewritten within R, the outputs within R of those) never meets another's and each is carried through the network on its own crop.
         block = max(R, 1)
         coarse = np.zeros((-(-ny // block), -(-nx // block)), dtype=bool)
         coarse[rows // block, cols // block] = True
@@ -168,7 +170,7 @@ class ProcessZoneInference:
             members = order[bounds[g]:bounds[g + 1]]
             if members.size:
                 r, c = rows[members], cols[members]
-                groups.append((r, c, grow_box((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), R + self.refresh_radius, (ny, nx))))
+                groups.append((r, c, grow_box((slice(r.min(), r.max() + 1), slice(c.min(), c.max() + 1)), 2 * R, (ny, nx))))
         if sum(box_area(crop) for _, _, crop in groups) > self.full_fraction * ny * nx:
             return self._full(capped)
         started = time.perf_counter()
@@ -176,10 +178,11 @@ class ProcessZoneInference:
         for r, c, crop in groups:
             mask = np.zeros((crop[0].stop - crop[0].start, crop[1].stop - crop[1].start), dtype=bool)
             mask[r - crop[0].start, c - crop[1].start] = True
-            if self.refresh_radius:
-                mask = self.evaluator.dilate(mask, self.refresh_radius)
-                r, c = np.nonzero(mask)
-                r, c = r + crop[0].start, c + crop[1].start
+            # rewrite the inputs within R of each change, not only its own: inputs that drifted
+            # just under the tolerance would otherwise stay stale next to the crack tip
+            mask = self.evaluator.dilate(mask, R)
+            r, c = np.nonzero(mask)
+            r, c = r + crop[0].start, c + crop[1].start
             self.state.set_inputs(capped, r, c)
             recomputed += int(np.count_nonzero(self.state.propagate(mask, (crop[0].start, crop[1].start))))
             # every output that depends on a rewritten input was just recomputed from its
