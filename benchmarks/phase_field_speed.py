@@ -1,4 +1,4 @@
-"""The phase-field step, FEM against IFENN with full-image and with process-zone inference,
+"""The phase-field step, FEM against IFENN with full-image, process-zone and verified inference,
 on snt1/snt2/snt3 (config 'phase_field_benchmark'): same process, same core, same loads from
 each FEM run's switch-over state (see ifenn.benchmark). Needs the FEM runs and the trained
 PICNN of the workflow (results/). Run it alone: the numbers are wall times.
@@ -27,6 +27,7 @@ def main() -> int:
                         help="IFENN run specs (results/ifenn/RUN/spec.json); default: phase_field_benchmark.runs of --config")
     parser.add_argument("--increments", type=int, default=None, help="default: phase_field_benchmark.increments")
     parser.add_argument("--process-zone", default=None, help="JSON of the process-zone settings; default: ifenn.process_zone of --config")
+    parser.add_argument("--verification", default=None, help="JSON of the verified step's settings; default: ifenn.verification of --config")
     parser.add_argument("--out", default="results/benchmarks/phase_field_speed.csv")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
@@ -40,13 +41,14 @@ def main() -> int:
     else:
         specs = [ifenn_run_spec(config, run) for run in setup["runs"]]
     zone = json.loads(args.process_zone) if args.process_zone else config["ifenn"]["process_zone"]
-    table = phase_field_speed(specs, zone, args.model, args.increments or setup["increments"])
+    verification = json.loads(args.verification) if args.verification else config["ifenn"]["verification"]
+    table = phase_field_speed(specs, zone, args.model, args.increments or setup["increments"], verification=verification)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
         print("\nPhase-field step, seconds per increment (mean over the increments after the switch-over):")
         print(table[["run", "pixels", "method", "network_kernel", "increments", "t_displacement_s", "t_phase_field_s", "t_phase_field_median_s",
-                     "evaluated_fraction", "phase_field_speedup_vs_fem", "final_force"]].to_string(index=False))
+                     "evaluated_fraction", "t_verify_s", "verify_corrected_fraction", "phase_field_speedup_vs_fem", "final_force"]].to_string(index=False))
     return 0
 
 

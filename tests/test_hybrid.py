@@ -58,3 +58,33 @@ def test_zero_padding_and_smoothing_leave_residual_force(fem_run, quick_config):
     assert zeros.reaction_force.iloc[-1] > 1.5 * final_fem
     assert smooth.reaction_force.iloc[-1] > 1.5 * final_fem
     assert smooth.phi_max.iloc[-1] < zeros.phi_max.iloc[-1]
+
+
+def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tmp_path):
+    """An untrained (random) PICNN, checked and corrected every increment: the corrected
+    phase field is the exact pixel solution within the tolerance, so the run tracks FEM as the
+    exact pixel solver does: force within 1 % (L2), cut through like FEM's, and every
+    increment ends with max |r| within the tolerance."""
+    import torch
+
+    from ifenn.picnn import PICNN, InputScaling, save_picnn
+
+    spec, tmp, fem = fem_run
+    torch.manual_seed(0)
+    net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    model = tmp_path / "random.pt"
+    save_picnn(net, model, spec["scene"]["domain"]["x"][1] / spec["scene"]["elements"][0], 2.7, 0.15, "test")
+    verified = {**quick_config["ifenn"]["verification"], "enabled": True}
+    run_spec = copy.deepcopy(spec)
+    run_spec.update({k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, name="verified", smoothing_sigma=None,
+                    irreversible=False, pixel_padding="replicate", inference="process_zone",
+                    process_zone=quick_config["ifenn"]["process_zone"], verification=verified)
+    hybrid = pd.DataFrame(run_ifenn(run_spec, tmp / "mesh.xdmf", tmp / "fem", model, tmp_path / "verified", progress=False))
+    active = hybrid[hybrid.hybrid_active == 1]
+    assert len(active) > 0
+    assert (active.verify_residual_after <= verified["tolerance"]).all()
+    assert active.verify_residual_before.iloc[0] > 10 * verified["tolerance"]  # the random network is flagged
+    assert (active.verify_corrected_fraction > 0).any()
+    assert _l2(hybrid.reaction_force, fem.reaction_force) < 0.01
+    peak = fem.reaction_force.max()
+    assert abs(hybrid.reaction_force.iloc[-1] - fem.reaction_force.iloc[-1]) < 0.05 * peak

@@ -53,3 +53,41 @@ def test_force_curve_error_compares_at_equal_displacement():
     assert force_curve_error(coarse, curve(coarse), fine, curve(fine)) < 1e-3
     assert force_curve_error(fine, 1.01 * curve(fine), fine, curve(fine)) == pytest.approx(0.01, rel=1e-6)
     assert force_curve_error(fine, curve(fine - 0.05), fine, curve(fine)) > 0.1
+
+
+def test_crack_ridge_phi_is_the_weakest_section_of_the_band():
+    """A straight band from a notch tip to the right edge with phi = 0.999 on its centre line
+    but 0.9 in one column: the weakest section is 0.9; a band that stops short connects nothing
+    beyond the far field's phi."""
+    from ifenn.metrics import crack_ridge_phi
+
+    ny, nx = 60, 80
+    rows = np.arange(ny)[:, None]
+    band = np.exp(-np.abs(rows - 30) / 3.0) * np.ones((1, nx))
+    phi = 0.999 * band
+    phi[:, :20] = 0.0           # the notch region left of the tip (column 20)
+    phi[:, 50] *= 0.9 / 0.999   # the weak section
+    tips = [((30, 20), (30, 0))]
+    assert crack_ridge_phi(phi, tips) == pytest.approx(0.9, abs=1e-6)
+    short = phi.copy()
+    short[:, 60:] = 0.05
+    assert crack_ridge_phi(short, tips) == pytest.approx(0.05, abs=1e-6)
+    # two tips: the cracks from both meet where phi is lowest between them
+    two = 0.999 * band
+    two[30, 39:41] = 0.7
+    two[29, 39:41] = two[31, 39:41] = 0.6
+    assert crack_ridge_phi(two, [((30, 5), None), ((30, 75), None)]) == pytest.approx(0.7, abs=1e-6)
+
+
+def test_post_switch_error_counts_only_hybrid_increments():
+    from ifenn.metrics import post_switch_force_error
+
+    u = np.linspace(0, 1, 11)
+    fem = pd.DataFrame({"u": u, "reaction_force": 10 * np.minimum(u, 1 - u) * 2})
+    ifenn = fem.assign(hybrid_active=(u > 0.5).astype(int))
+    ifenn.loc[ifenn.u > 0.5, "reaction_force"] += 1.0
+    ifenn.loc[1, "reaction_force"] += 5.0   # before the switch: not counted
+    out = post_switch_force_error(fem, ifenn)
+    assert out["post_switch_increments"] == 5
+    assert out["post_switch_rms_error"] == pytest.approx(1.0 / 10.0)
+    assert out["post_switch_max_error"] == pytest.approx(1.0 / 10.0)

@@ -21,9 +21,15 @@ from pathlib import Path
 
 import pandas as pd
 
-#: method -> (inference, evaluation) of the IFENN step (None: the FEM step)
-METHODS = {"fem": None, "ifenn_full_convolution": ("full", "convolution"), "ifenn_full": ("full", "orbit"),
-           "ifenn_process_zone": ("process_zone", "orbit")}
+#: method -> overrides of the IFENN run spec (None: the FEM step). The verified methods check
+#: every prediction by the pixel equation and correct it (ifenn.verification), with the network
+#: as the warm start or with the last verified phi only (no network: what the network saves).
+_VERIFIED = {"inference": "process_zone", "evaluation": "orbit", "smoothing_sigma": None, "irreversible": False}
+METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluation": "convolution"},
+           "ifenn_full": {"inference": "full", "evaluation": "orbit"},
+           "ifenn_process_zone": {"inference": "process_zone", "evaluation": "orbit"},
+           "ifenn_verified": {**_VERIFIED, "verification": {"warm_start": "network"}},
+           "ifenn_verified_nonet": {**_VERIFIED, "verification": {"warm_start": "previous"}}}
 
 
 def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
@@ -36,8 +42,13 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     switch, state, rows = switch_state(fem_dir)
     spec = copy.deepcopy(spec)
     spec.update(name=f"{spec['name']}-{method}", load=spec["load"][: switch + increments], save_fields=[], checkpoint_every=10**6)
-    if METHODS[method]:
-        spec.update(inference=METHODS[method][0], evaluation=METHODS[method][1])
+    overrides = copy.deepcopy(METHODS[method])
+    if overrides:
+        if "verification" in overrides:
+            overrides["verification"] = {**spec["verification"], **overrides["verification"], "enabled": True}
+        else:
+            spec.pop("verification", None)
+        spec.update(overrides)
     domain = read_dolfinx_mesh(mesh_path)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
     kernel = ""
@@ -46,7 +57,8 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     else:
         inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
         kernel = inference.kernel
-        step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
+        verified = "verification" in spec
+        step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"], verified)
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,
                        row_constants={"hybrid_active": int(method != "fem")})
@@ -55,16 +67,18 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
 
 
 def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | Path, increments: int = 40,
-                      results: str | Path = "results") -> pd.DataFrame:
+                      results: str | Path = "results", verification: dict | None = None) -> pd.DataFrame:
     """One row per (IFENN run spec, method): mean seconds per increment of the displacement
     solve, the phase-field step and the increment, the fraction of pixels the network
     evaluated, and the phase-field step's speed-up over FEM's. ``process_zone``: the settings
-    of the process-zone method (config 'ifenn.process_zone')."""
+    of the process-zone method (config 'ifenn.process_zone'); ``verification``: those of the
+    verified methods (config 'ifenn.verification'; ``enabled`` is set by the method)."""
     results = Path(results)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
-            spec = {**spec, "process_zone": spec.get("process_zone") or process_zone}
+            spec = {**spec, "process_zone": spec.get("process_zone") or process_zone,
+                    "verification": spec.get("verification") or verification or {}}
             fem_dir = results / "fem" / spec["fem_run"]
             mesh = results / "mesh" / f"{spec['scene_name']}.xdmf"
             for method in METHODS:
@@ -79,6 +93,11 @@ def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | P
                              "t_inference_s": history.t_inference_s.mean() if "t_inference_s" in history else 0.0,
                              "evaluated_fraction": history.evaluated_fraction.mean() if "evaluated_fraction" in history else 1.0,
                              "t_increment_s": history.t_increment_s.mean(),
+                             "t_verify_s": history.t_verify_s.mean() if "t_verify_s" in history else 0.0,
+                             "verify_corrected_fraction": (history.verify_corrected_fraction.mean()
+                                                           if "verify_corrected_fraction" in history else 0.0),
+                             "verify_residual_after_max": (history.verify_residual_after.max()
+                                                           if "verify_residual_after" in history else float("nan")),
                              "final_force": history.reaction_force.iloc[-1]})
     table = pd.DataFrame(rows)
     fem = table[table.method == "fem"].set_index("run").t_phase_field_s

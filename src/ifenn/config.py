@@ -175,11 +175,18 @@ def _semantic_problems(config: dict) -> list[str]:
         problems.append(f"config key 'picnn.settings': {error}")
     figures = config["figures"]
     named = [(f"figures.comparisons.{r}", r) for r in figures["comparisons"]]
+    named += [(f"figures.comparisons.{r}.verified", o["verified"]) for r, o in figures["comparisons"].items() if "verified" in o]
     named += [("figures.views_3d.run", figures["views_3d"]["run"])]
     named += [(f"figures.mesh_study.runs[{k}]", r) for k, r in enumerate(figures["mesh_study"]["runs"])]
     for key, run in named:
         if run not in config.get("ifenn_runs", {}):
             problems.append(f"config key '{key}': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    for run, options in figures["comparisons"].items():
+        other = options.get("verified")
+        runs = config.get("ifenn_runs", {})
+        if other in runs and run in runs and runs[other]["fem_run"] != runs[run]["fem_run"]:
+            problems.append(f"config key 'figures.comparisons.{run}.verified': '{other}' continues FEM run "
+                            f"'{runs[other]['fem_run']}', not '{runs[run]['fem_run']}'")
     for scene, setup in config.get("speed_accuracy", {}).items():
         for key, pool in (("reference", "fem_runs"), ("fem", "fem_runs"), ("ifenn", "ifenn_runs")):
             names = [setup[key]] if key == "reference" else setup.get(key, [])
@@ -205,6 +212,14 @@ def _semantic_problems(config: dict) -> list[str]:
         if setting["inference"] == "process_zone" and (setting["predictor"] != "picnn" or setting["evaluation"] != "orbit"):
             problems.append(f"config key 'ifenn_runs.{name}.inference': process_zone needs predictor 'picnn' with evaluation "
                             f"'orbit', got predictor '{setting['predictor']}' and evaluation '{setting['evaluation']}'")
+        verification = {**config["ifenn"].get("verification", {}), **run.get("verification", {})}
+        if verification.get("enabled") and setting["predictor"] != "picnn":
+            problems.append(f"config key 'ifenn_runs.{name}.verification.enabled': verification checks the PICNN's "
+                            f"prediction; it needs predictor 'picnn', got '{setting['predictor']}'")
+        padding = run.get("pixel_padding", config["ifenn"].get("pixel_padding"))
+        if verification.get("enabled") and padding not in ("replicate", "zeros"):
+            problems.append(f"config key 'ifenn_runs.{name}.pixel_padding': the verified step's pixel equation needs "
+                            f"'replicate' or 'zeros', got '{padding}'")
     return problems
 
 
@@ -282,6 +297,9 @@ def ifenn_run_spec(config: dict, run: str) -> dict:
     spec["inference"] = entry.get("inference", config["ifenn"]["inference"])
     if spec["inference"] == "process_zone":  # its settings belong to the spec only when used
         spec["process_zone"] = deep_merge(config["ifenn"]["process_zone"], entry.get("process_zone", {}))
+    verification = deep_merge(config["ifenn"]["verification"], entry.get("verification", {}))
+    if verification["enabled"]:  # its settings belong to the spec only when used
+        spec["verification"] = verification
     for key in ("stagger_max_iterations", "stagger_tolerance"):
         spec[key] = entry.get(key, spec[key])
     return spec

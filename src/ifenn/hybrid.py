@@ -33,8 +33,25 @@ def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
 
 
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
-    """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image.
-    ``shape``: the image's, when known (what the network keeps is then allocated now)."""
+    """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
+    checked and corrected by the pixel equation when ``spec['verification']['enabled']``
+    (:mod:`ifenn.verification`). ``shape``: the image's, when known (what the network keeps
+    is then allocated now)."""
+    verification = spec.get("verification") or {}
+    if verification.get("enabled"):
+        from .verification import PixelEquation, VerifiedInference
+
+        if spec["predictor"] != "picnn":
+            raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
+        warm_start = verification["warm_start"]
+        network = _network_inference(spec, model_path, h_px, shape) if warm_start != "previous" else None
+        Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
+        return VerifiedInference(network, PixelEquation(Gc, lc, h_px, spec["pixel_padding"]), verification["tolerance"],
+                                 verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start)
+    return _network_inference(spec, model_path, h_px, shape)
+
+
+def _network_inference(spec: dict, model_path, h_px: float, shape):
     from .process_zone import FullInference, ProcessZoneInference
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
@@ -76,7 +93,9 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
     inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
-    step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
+    verified = bool((spec.get("verification") or {}).get("enabled"))
+    step = PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
+                           spec["irreversible"], verified)
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1})
     return run.run()

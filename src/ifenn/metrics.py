@@ -6,11 +6,13 @@ FEM and IFENN are measured with the same discrete operators.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pandas as pd
+import scipy.ndimage
 
 CRACK_PHI = 0.5
 
@@ -47,6 +49,86 @@ def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+def post_switch_force_error(fem: pd.DataFrame, ifenn: pd.DataFrame) -> dict:
+    """IFENN against FEM where the two can differ, after the switch-over: over the hybrid
+    increments (within FEM's u range), the RMS and the largest |F_IFENN| - |F_FEM| (FEM
+    interpolated at IFENN's u), divided by FEM's peak force. NaN without hybrid increments."""
+    u_fem, f_fem = fem.u.to_numpy(), np.abs(fem.reaction_force.to_numpy())
+    hybrid = ifenn[(ifenn.hybrid_active == 1) & (ifenn.u <= u_fem[-1] + 1e-15)]
+    if hybrid.empty:
+        return {"post_switch_increments": 0, "post_switch_rms_error": np.nan, "post_switch_max_error": np.nan}
+    error = np.abs(hybrid.reaction_force.to_numpy()) - np.interp(hybrid.u.to_numpy(), u_fem, f_fem)
+    peak = f_fem.max()
+    return {"post_switch_increments": len(hybrid), "post_switch_rms_error": float(np.sqrt(np.mean(error**2)) / peak),
+            "post_switch_max_error": float(np.abs(error).max() / peak)}
+
+
+def _notch_tips(scene: dict, pixels) -> list[tuple[tuple[int, int], tuple[int, int] | None]]:
+    """(tip pixel, pixel where the notch meets the boundary or None) of every notch end inside
+    the domain (the ends a crack starts from); pixels as (row, column)."""
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    tol = 1e-9 * max(x1 - x0, y1 - y0)
+
+    def pixel(point):
+        col = min(max(int((point[0] - pixels["x0"]) / pixels["h_px"]), 0), int(pixels["nx_px"]) - 1)
+        row = min(max(int((point[1] - pixels["y0"]) / pixels["h_px"]), 0), int(pixels["ny_px"]) - 1)
+        return row, col
+
+    def inside(point):
+        return x0 + tol < point[0] < x1 - tol and y0 + tol < point[1] < y1 - tol
+
+    tips = []
+    for notch in scene.get("notches", []):
+        for end, other in ((notch["start"], notch["end"]), (notch["end"], notch["start"])):
+            if inside(end):
+                tips.append((pixel(end), None if inside(other) else pixel(other)))
+    return tips
+
+
+def crack_ridge_phi(phase_field: np.ndarray, tips: list, tip_radius: int = 3, edge_clearance: int = 8) -> float:
+    """The phase field at the weakest point of the crack: the largest t for which the set
+    {phi >= t} connects what the crack must connect, i.e. every notch tip with the others (two
+    or more tips: the cracks meet), or the one tip with the image boundary away from its notch
+    (one tip: the crack cuts through). Every path between them drops to t somewhere, so t is
+    the largest phi across the band at the crack's weakest section (the stiffness left there
+    is (1 - t)^2). ``tips``: (tip pixel, the notch's boundary pixel or None), as of
+    ``_notch_tips``; tips count as discs of ``tip_radius`` pixels; boundary pixels within
+    ``edge_clearance`` of the notch's own boundary pixel do not count. NaN without a tip."""
+    if not tips:
+        return float("nan")
+    ny, nx = phase_field.shape
+    rows, cols = np.mgrid[0:ny, 0:nx]
+    discs = [(rows - r) ** 2 + (cols - c) ** 2 <= tip_radius**2 for (r, c), _ in tips]
+    if len(tips) == 1:
+        boundary = np.zeros_like(phase_field, dtype=bool)
+        boundary[[0, -1], :] = boundary[:, [0, -1]] = True
+        mouth = tips[0][1]
+        if mouth is not None:
+            boundary &= np.maximum(np.abs(rows - mouth[0]), np.abs(cols - mouth[1])) > edge_clearance
+        targets = [discs[0], boundary]
+    else:
+        targets = discs
+    structure = np.ones((3, 3), int)
+
+    def connected(t: float) -> bool:
+        labels, _ = scipy.ndimage.label(phase_field >= t, structure=structure)
+        common = None
+        for target in targets:
+            found = set(np.unique(labels[target]).tolist()) - {0}
+            common = found if common is None else common & found
+            if not common:
+                return False
+        return True
+
+    lo, hi = 0.0, float(phase_field.max())
+    if not connected(1e-12):
+        return 0.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if connected(mid) else (lo, mid)
+    return lo
+
+
 def _nearest(maps: dict, u: float) -> int:
     return min(maps, key=lambda k: abs(maps[k][0] - u))
 
@@ -66,6 +148,7 @@ def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels:
         "u_peak_fem": float(fem.u.iloc[peak_fem]), "u_peak_ifenn": float(ifenn.u.iloc[peak_ifenn]),
         "force_l2_rel_error": force_curve_error(ifenn.u.to_numpy(), f_ifenn, fem.u.to_numpy(), f_fem),
         "final_force_fraction_fem": f_fem[-1] / f_fem[peak_fem], "final_force_fraction_ifenn": f_ifenn[-1] / f_fem[peak_fem],
+        **post_switch_force_error(fem, ifenn),
     }
     fem_maps, attrs = _fields(Path(fem_dir) / "fields.h5")
     ifenn_maps, _ = _fields(Path(ifenn_dir) / "fields.h5")
@@ -75,6 +158,11 @@ def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels:
     row["dissipated_energy_fem"] = dissipated_energy(fem_maps[last_fem][1], h_px, material["Gc"], material["lc"])
     row["dissipated_energy_ifenn"] = dissipated_energy(ifenn_maps[last_ifenn][1], h_px, material["Gc"], material["lc"])
     row["dissipated_energy_rel_error"] = row["dissipated_energy_ifenn"] / row["dissipated_energy_fem"] - 1.0
+    spec_path = Path(fem_dir) / "spec.json"
+    if spec_path.exists():
+        tips = _notch_tips(json.loads(spec_path.read_text())["scene"], attrs)
+        row["crack_ridge_phi_fem"] = crack_ridge_phi(fem_maps[last_fem][1], tips)
+        row["crack_ridge_phi_ifenn"] = crack_ridge_phi(ifenn_maps[last_ifenn][1], tips)
     u_switch = row["u_switch"] if np.isfinite(row["u_switch"]) else np.inf
     after = sorted(i for i in fem_maps if fem_maps[i][0] > u_switch)
     picks = [after[int(round(k))] for k in np.linspace(0, len(after) - 1, levels)] if after else []
@@ -99,6 +187,7 @@ def timing(fem_history: pd.DataFrame, ifenn_history: pd.DataFrame) -> list[dict]
             "method": method, "increments": len(frame),
             "t_displacement_s": frame.t_displacement_s.mean(), "t_phase_field_s": frame.t_phase_field_s.mean(),
             "t_inference_s": frame.t_inference_s.mean() if "t_inference_s" in frame else 0.0,
+            "t_verify_s": frame.t_verify_s.mean() if "t_verify_s" in frame else 0.0,
             "t_history_s": frame.t_history_s.mean(), "t_increment_s": frame.t_increment_s.mean(),
             "phase_field_cumulative_s": frame.t_phase_field_s.sum(), "run_cumulative_s": frame.t_increment_s.sum(),
         })

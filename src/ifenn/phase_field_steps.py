@@ -74,16 +74,31 @@ class PixelPhaseField:
     Gauss-point fields are scattered back to every rank.
     """
 
-    extra_columns = ("t_inference_s", "evaluated_fraction")
+    #: columns of a verified step (:class:`ifenn.verification.VerifiedInference`): share of
+    #: the image corrected, max |r| before and after the correction, the correction's work in
+    #: whole-image CG iterations (load-independent), check + correction time;
+    #: over the staggered iterations of an increment the share and time are summed, the
+    #: residuals are those of the last iteration
+    VERIFY_COLUMNS = ("verify_corrected_fraction", "verify_residual_before", "verify_residual_after", "verify_solve_work",
+                      "t_verify_s")
 
-    def __init__(self, problem: FractureProblem, inference, name: str, history_cap: float, irreversible: bool = True):
+    def __init__(self, problem: FractureProblem, inference, name: str, history_cap: float, irreversible: bool = True,
+                 verified: bool = False):
+        """``verified``: ``inference`` (on rank 0) is a :class:`ifenn.verification.VerifiedInference`."""
         self.problem, self.inference, self.name = problem, inference, name
-        self.history_cap, self.irreversible = history_cap, irreversible
+        self.history_cap, self.irreversible, self.verified = history_cap, irreversible, verified
+        self._started = False
+        self.extra_columns = ("t_inference_s", "evaluated_fraction") + (self.VERIFY_COLUMNS if self.verified else ())
         self._new_phase_field = fem.Function(problem.Q)
-        self.timings = {"t_inference_s": 0.0, "evaluated_fraction": 0.0}
+        self.timings = dict.fromkeys(self.extra_columns, 0.0)
 
     def step(self) -> int:
         problem = self.problem
+        if self.verified and not self._started:  # the phase field the run continues from (collective)
+            start = problem.pixels_from_gauss_points(problem.phase_field_gp)
+            if start is not None:
+                self.inference.start_from(start)
+            self._started = True
         image = problem.pixels_from_gauss_points(problem.history)
         phi = None
         if image is not None:
@@ -91,6 +106,12 @@ class PixelPhaseField:
             # summed over staggered iterations, like the other timings
             self.timings["t_inference_s"] += self.inference.t_network
             self.timings["evaluated_fraction"] += self.inference.evaluated_fraction
+            if self.verified:
+                self.timings["verify_corrected_fraction"] += self.inference.corrected_fraction
+                self.timings["verify_residual_before"] = self.inference.residual_before
+                self.timings["verify_residual_after"] = self.inference.residual_after
+                self.timings["verify_solve_work"] += self.inference.solve_work
+                self.timings["t_verify_s"] += self.inference.t_check + self.inference.t_correction
         problem.gauss_points_from_pixels(phi, self._new_phase_field)
         new = self._new_phase_field.x.array
         if self.irreversible:

@@ -195,21 +195,32 @@ def comparison_levels(fem_maps: dict, ifenn_maps: dict, switch: int, count: int)
 
 
 def comparison_figure(fem_history, ifenn_history, fem_fields, ifenn_fields, path, title: str,
-                      levels: int = 4, zoom: dict | None = None) -> None:
+                      levels: int = 4, zoom: dict | None = None, verified_history=None, verified_fields=None) -> None:
     """Force curves of FEM and IFENN, then phase-field contours at ``levels`` load levels after
-    the switch-over: FEM (top row) and IFENN (bottom row), same colour scale."""
+    the switch-over: FEM (top row), IFENN as published, and verified IFENN when given (its
+    history and fields), same colour scale."""
     fem_maps, attrs = read_phase_field_maps(fem_fields)
     ifenn_maps, _ = read_phase_field_maps(ifenn_fields)
+    panels = [("FEM", fem_maps), ("IFENN", ifenn_maps)]
+    if verified_fields is not None:
+        verified_maps, _ = read_phase_field_maps(verified_fields)
+        panels.append(("verified IFENN", verified_maps))
+        common = {k: v for k, v in ifenn_maps.items() if k in verified_maps}
+    else:
+        common = ifenn_maps
     switch = int(ifenn_history.increment[ifenn_history.hybrid_active == 1].min())
-    chosen = comparison_levels(fem_maps, ifenn_maps, switch, levels)
+    chosen = comparison_levels(fem_maps, common, switch, levels)
     rows, cols, extent = _window(attrs, zoom)
     ncol = max(len(chosen), 1)
     aspect = (extent[3] - extent[2]) / (extent[1] - extent[0])
-    fig = plt.figure(figsize=(3.2 * ncol + 1, 3.6 + 2 * 3.2 * ncol * aspect / ncol + 0.6))
-    grid = fig.add_gridspec(3, ncol, height_ratios=[1.3, aspect * 1.1, aspect * 1.1])
+    n_maps = len(panels)
+    fig = plt.figure(figsize=(3.2 * ncol + 1, 3.6 + n_maps * 3.2 * aspect + 0.6))
+    grid = fig.add_gridspec(1 + n_maps, ncol, height_ratios=[1.3] + [aspect * 1.1] * n_maps)
     ax = fig.add_subplot(grid[0, :])
     ax.plot(fem_history.u, fem_history.reaction_force, label="FEM", lw=1.6)
-    ax.plot(ifenn_history.u, ifenn_history.reaction_force, "--", label="IFENN", lw=1.6)
+    ax.plot(ifenn_history.u, ifenn_history.reaction_force, "--", label="IFENN (published)", lw=1.6)
+    if verified_history is not None:
+        ax.plot(verified_history.u, verified_history.reaction_force, "-.", label="verified IFENN", lw=1.6)
     ax.axvline(ifenn_history.u[ifenn_history.increment == switch].iloc[0], color="0.5", lw=0.8, ls=":", label="switch-over")
     for k, increment in enumerate(chosen):
         ax.axvline(fem_maps[increment][0], color="0.8", lw=0.6)
@@ -221,7 +232,7 @@ def comparison_figure(fem_history, ifenn_history, fem_fields, ifenn_fields, path
     ax.grid(alpha=0.3)
     image = None
     for k, increment in enumerate(chosen):
-        for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
+        for r, (label, maps) in enumerate(panels):
             ax = fig.add_subplot(grid[r + 1, k])
             image = ax.imshow(maps[increment][1][rows, cols], origin="lower", extent=extent, cmap="jet", vmin=0, vmax=1)
             ax.set_title(f"{k + 1}: {label}, u = {maps[increment][0]:.4g}", fontsize=8)

@@ -33,6 +33,9 @@ def _label(config: dict, method: str, run: str) -> str:
     predictor = entry.get("predictor", config["ifenn"]["predictor"])
     inference = entry.get("inference", config["ifenn"]["inference"])
     what = "exact pixel solve" if predictor == "exact_pixel" else ("PICNN process zone" if inference == "process_zone" else "PICNN full image")
+    verification = {**config["ifenn"].get("verification", {}), **entry.get("verification", {})}
+    if verification.get("enabled"):
+        what = "verified, no network" if verification.get("warm_start") == "previous" else f"verified {what}"
     return f"IFENN {fem['schedule']}, {stagger}, {what}"
 
 

@@ -57,6 +57,15 @@ def ifenn_pair(run):
             "ifenn_history": f"results/ifenn/{run}/history.csv", "ifenn_fields": f"results/ifenn/{run}/fields.h5"}
 
 
+def comparison_inputs(run):
+    """The FEM/IFENN pair of a comparison figure, and the verified IFENN run drawn beside it."""
+    inputs = ifenn_pair(run)
+    verified = config["figures"]["comparisons"][run].get("verified")
+    if verified:
+        inputs.update(verified_history=f"results/ifenn/{verified}/history.csv", verified_fields=f"results/ifenn/{verified}/fields.h5")
+    return inputs
+
+
 def speed_accuracy_inputs(wildcards):
     runs = config["speed_accuracy"].values()
     return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}

@@ -3,7 +3,7 @@
 
 rule comparison_figure:
     input:
-        unpack(lambda w: ifenn_pair(w.run)),
+        unpack(lambda w: comparison_inputs(w.run)),
     output:
         report("results/figures/paper/{run}_comparison.png", caption="../report/comparison.rst", category="Paper figures"),
     params:

@@ -76,6 +76,7 @@ rule phase_field_benchmark:
         script=os.path.join(workflow.basedir, "benchmarks", "phase_field_speed.py"),
         increments=config.get("phase_field_benchmark", {}).get("increments", 40),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
+        verification=lambda w: json.dumps(json.dumps(config["ifenn"]["verification"])),
     # all cores: nothing else runs while it measures
     threads: all_cores
     conda:
@@ -84,4 +85,5 @@ rule phase_field_benchmark:
         "logs/benchmarks/phase_field_speed.log",
     shell:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model}"
-        " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone} --out {output} > {log} 2>&1"
+        " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone}"
+        " --verification {params.verification} --out {output} > {log} 2>&1"

@@ -5,5 +5,9 @@ from ifenn.plots import comparison_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 i, options = snakemake.input, snakemake.params.options
+verified = "verified_history" in i.keys()
 comparison_figure(pd.read_csv(i.fem_history), pd.read_csv(i.ifenn_history), i.fem_fields, i.ifenn_fields, snakemake.output[0],
-                  title=f"{snakemake.wildcards.run}: FEM vs IFENN", levels=options.get("levels", 4), zoom=options.get("zoom"))
+                  title=f"{snakemake.wildcards.run}: FEM vs IFENN" + (" (published and verified)" if verified else ""),
+                  levels=options.get("levels", 4), zoom=options.get("zoom"),
+                  verified_history=pd.read_csv(i.verified_history) if verified else None,
+                  verified_fields=i.verified_fields if verified else None)

@@ -1,0 +1,363 @@
+"""Verified phase-field step: every prediction checked by the pixel equation it was trained
+on, and corrected where it fails.
+
+The pixel equation (the PICNN's physics loss, :func:`ifenn.picnn.residual`) at pixel i:
+
+    R_i(phi) = (Gc/lc + 2 H_i) phi_i - D (K9*(phi)_i - 3 phi_i) - 2 H_i,   D = Gc lc / h_px^2,
+
+with H the capped history (the network's input) and the Laplacian's padding ("replicate":
+zero flux, or "zeros"). Written as A phi = 2 H, A is a strictly diagonally dominant M-matrix:
+off-diagonal entries -D w_ij <= 0 and every row sums to at least a_i = Gc/lc + 2 H_i (exactly
+a_i with zero flux; more with zeros padding, which drops the neighbours beyond the image).
+
+Normalisation and what the tolerance means. The check uses r_i = R_i / a_i, a phase field
+(dimensionless). For any M-matrix of that kind, ||A^-1 R||_inf <= max_i |R_i| / a_i (take
+the pixel i where the error e = phi - phi* is largest: |R_i| = |a_i e_i + sum_j A_ij (e_i -
+e_j)... | >= a_i |e_i|, since the off-diagonal part only pulls e_i towards smaller
+neighbours). So
+
+    max_i |r_i| <= tolerance   implies   max_i |phi_i - phi*_i| <= tolerance,
+
+where phi* is the exact solution of the pixel equation for this H: the check is a
+certificate in the max norm, in the units of phi, with no constant to tune. Why the max
+norm: the force after a crack has formed is set by the weakest band across it, i.e. by
+phi where it is largest; an error of 1e-3 keeps the band's stiffness g = (1 - phi)^2 below
+~4e-6 of the intact one where the exact pixel solution reaches 0.999 (the H cap of 5e4
+N/mm^2), while a mean-square norm would let a few wrong pixels across the crack through.
+The Jacobi-scaled residual R_i / A_ii would not do: the diagonal holds 3 D ~ 4e4 N/mm^2
+besides a_i ~ 90 N/mm^2 in the far field, so it under-reports smooth errors 400-fold.
+
+Correction. The pixels with |r_i| > tolerance are grown by ``margin_lc`` phase-field lengths
+(the change of phi decays as exp(-d/lc); where a box's new values meet the old ones, the
+Laplacian turns a jump delta into |r| ~ (lc/h_px)^2 delta, so the margin must take the change
+down by that factor: 6 lc at lc/h_px = 12) and grouped into boxes (the connected groups' bounding boxes); on each box the pixel equation is solved
+with the values around it as Dirichlet data (the image's own padding where the box meets
+the image edge) by Jacobi-preconditioned conjugate gradients, warm-started from the
+candidate, until max |r| <= ``solve_fraction`` x tolerance inside the box. The pixels next
+to a box see its new values, so the check runs again there; boxes that still fail grow
+and are solved again, up to ``max_rounds``. A step that still fails after that is reported
+(``verify_residual_after`` > tolerance), never passed on silently.
+
+Warm starts ("what the network is worth"): ``network`` takes the network's prediction where
+it changed since the last step and the last verified phi elsewhere; ``increment`` adds the
+change of the network's prediction to the last verified phi (the network as a predictor of
+the change, whose error is smaller where the network's error is systematic); ``previous``
+ignores the network and starts from the last verified phi (the correction alone is then a
+local pixel solver of the changed region). The check itself is the same.
+
+Cost. The residual is recomputed only where its inputs changed: pixels whose capped H or
+whose candidate phi changed, and their 8 neighbours; elsewhere it is the one that passed
+the last check. The first call checks the whole image.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.fft
+import scipy.ndimage
+
+from .picnn import LAPLACIAN_K9_STAR
+from .pixels import Box, box_area, grow_box
+
+WARM_STARTS = ("network", "increment", "previous")
+
+
+def _stencil_sum(padded: np.ndarray) -> np.ndarray:
+    """K9*(x) of the interior of a once-padded array (n + 2, m + 2) -> (n, m)."""
+    edge = padded[1:-1, :-2] + padded[1:-1, 2:] + padded[:-2, 1:-1] + padded[2:, 1:-1]
+    corner = padded[:-2, :-2] + padded[:-2, 2:] + padded[2:, :-2] + padded[2:, 2:]
+    return LAPLACIAN_K9_STAR[0, 1] * edge + LAPLACIAN_K9_STAR[0, 0] * corner
+
+
+def _pad_image(image: np.ndarray, padding: str) -> np.ndarray:
+    return np.pad(image, 1, mode="edge" if padding == "replicate" else "constant")
+
+
+def pixel_residual(phi: np.ndarray, history: np.ndarray, Gc: float, lc: float, h_px: float,
+                   padding: str = "replicate") -> np.ndarray:
+    """R = (Gc/lc + 2H) phi - Gc lc Lap(phi) - 2H on the whole image, N/mm^2 (float64).
+    The same residual as :func:`ifenn.picnn.residual`, in numpy."""
+    phi = np.asarray(phi, dtype=np.float64)
+    diffusion = Gc * lc / h_px**2
+    return (Gc / lc + 2.0 * history) * phi - diffusion * (_stencil_sum(_pad_image(phi, padding)) - 3.0 * phi) - 2.0 * history
+
+
+def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate") -> np.ndarray:
+    """r = R / (Gc/lc + 2H): an upper bound, in the max norm, of |phi - exact| (module doc)."""
+    return pixel_residual(phi, history, Gc, lc, h_px, padding) / (Gc / lc + 2.0 * np.asarray(history, dtype=np.float64))
+
+
+class PixelEquation:
+    """The pixel equation of one image: residuals and local solves on boxes."""
+
+    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate"):
+        if padding not in ("replicate", "zeros"):
+            raise ValueError(f"pixel equation padding must be 'replicate' or 'zeros', got {padding!r}")
+        self.Gc, self.lc, self.h_px, self.padding = Gc, lc, h_px, padding
+        self.diffusion = Gc * lc / h_px**2
+        self.reaction0 = Gc / lc
+
+    def _extended(self, phi: np.ndarray, box: Box) -> np.ndarray:
+        """phi on ``box`` with a one-pixel frame: image values where the box is inside, the
+        padding where it meets the image edge."""
+        (r0, r1), (c0, c1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
+        ny, nx = phi.shape
+        rows = np.clip(np.arange(r0 - 1, r1 + 1), 0, ny - 1)
+        cols = np.clip(np.arange(c0 - 1, c1 + 1), 0, nx - 1)
+        ext = phi[np.ix_(rows, cols)].astype(np.float64)
+        if self.padding == "zeros":
+            if r0 == 0:
+                ext[0, :] = 0.0
+            if r1 == ny:
+                ext[-1, :] = 0.0
+            if c0 == 0:
+                ext[:, 0] = 0.0
+            if c1 == nx:
+                ext[:, -1] = 0.0
+        return ext
+
+    def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box) -> np.ndarray:
+        """Normalised residual r on ``box`` (its own shape)."""
+        ext = self._extended(phi, box)
+        centre = ext[1:-1, 1:-1]
+        reaction = self.reaction0 + 2.0 * history[box]
+        raw = reaction * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre) - 2.0 * history[box]
+        return raw / reaction
+
+    def _apply(self, x: np.ndarray, reaction: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
+        """A x on a box for x with zero Dirichlet data around it (padding on image edges)."""
+        ext = np.zeros((x.shape[0] + 2, x.shape[1] + 2))
+        ext[1:-1, 1:-1] = x
+        if self.padding == "replicate":
+            bottom, top, left, right = edges
+            if bottom:
+                ext[0, 1:-1] = x[0]
+            if top:
+                ext[-1, 1:-1] = x[-1]
+            if left:
+                ext[:, 0] = ext[:, 1]
+            if right:
+                ext[:, -1] = ext[:, -2]
+        return reaction * x - self.diffusion * (_stencil_sum(ext) - 3.0 * x)
+
+    def _preconditioner(self, box: Box, shape: tuple[int, int], reaction: np.ndarray):
+        """The exact inverse of the constant-coefficient operator min(a) I - D (K9* - 3 I) on
+        the box, by a fast sine transform (zero Dirichlet data around the box: exact there) or,
+        for the whole image, by the image padding's own transform (as the global pixel solver)."""
+        from .picnn import _fast_transforms, _laplacian_symbol
+
+        n, m = box[0].stop - box[0].start, box[1].stop - box[1].start
+        if (n, m) == tuple(shape):
+            symbol = reaction.min() - self.diffusion * _laplacian_symbol(n, m, self.padding)
+            forward, inverse = _fast_transforms(self.padding)
+            return lambda r: inverse(forward(r) / symbol)
+        s_y = 2.0 * np.cos(np.pi * np.arange(1, n + 1) / (n + 1))[:, None]
+        s_x = 2.0 * np.cos(np.pi * np.arange(1, m + 1) / (m + 1))[None, :]
+        symbol = reaction.min() - self.diffusion * (0.5 * (s_x + s_y) + 0.25 * s_x * s_y - 3.0)
+        return lambda r: scipy.fft.dstn(scipy.fft.dstn(r, type=1, norm="ortho") / symbol, type=1, norm="ortho")
+
+    def solve_box(self, phi: np.ndarray, history: np.ndarray, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
+        """Solve the pixel equation on ``box`` in place in ``phi`` (the values around the box
+        fixed), to max |r| <= ``target`` inside it, by conjugate gradients preconditioned with
+        the constant-coefficient inverse (:meth:`_preconditioner`). Returns (max |r| reached,
+        iterations); raises if ``maxiter`` iterations do not get there."""
+        ny, nx = phi.shape
+        edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
+        reaction = self.reaction0 + 2.0 * history[box]
+        ext = self._extended(phi, box)
+        centre = ext[1:-1, 1:-1]
+        # the correction delta solves A delta = -R(phi), zero around the box
+        residual = -(reaction * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre) - 2.0 * history[box])
+        worst = float(np.max(np.abs(residual) / reaction))
+        iterations = 0
+        delta = np.zeros_like(centre)
+        if worst > target:
+            precondition = self._preconditioner(box, phi.shape, reaction)
+            z = precondition(residual)
+            direction = z.copy()
+            rz = float(np.vdot(residual, z))
+            while True:
+                if iterations == maxiter:
+                    raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
+                                       f"(reached {worst:g})")
+                iterations += 1
+                a_dir = self._apply(direction, reaction, edges)
+                alpha = rz / float(np.vdot(direction, a_dir))
+                delta += alpha * direction
+                residual -= alpha * a_dir
+                worst = float(np.max(np.abs(residual) / reaction))
+                if worst <= target:
+                    break
+                z = precondition(residual)
+                rz_new = float(np.vdot(residual, z))
+                direction = z + (rz_new / rz) * direction
+                rz = rz_new
+        phi[box] = centre + delta
+        return worst, iterations
+
+
+def _bounding_box(mask: np.ndarray, grow: int) -> Box | None:
+    """The bounding box of ``mask``'s pixels grown by ``grow`` (clipped), None if empty."""
+    rows, cols = np.nonzero(np.any(mask, axis=1))[0], np.nonzero(np.any(mask, axis=0))[0]
+    if rows.size == 0:
+        return None
+    return grow_box((slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)), grow, mask.shape)
+
+
+def _dilated(mask: np.ndarray, by: int) -> np.ndarray:
+    """``mask`` grown by ``by`` pixels (square), computed on its bounding box only."""
+    crop = _bounding_box(mask, by)
+    out = np.zeros_like(mask)
+    if crop is not None and by > 0:  # a square's maximum filter is separable: O(pixels), whatever ``by``
+        out[crop] = scipy.ndimage.maximum_filter(mask[crop].view(np.uint8), size=2 * by + 1, mode="constant") > 0
+    elif crop is not None:
+        out[crop] = mask[crop]
+    return out
+
+
+def _boxes(mask: np.ndarray, margin: int) -> list[Box]:
+    """Bounding boxes of the connected groups of ``mask`` grown by ``margin`` pixels; boxes
+    that overlap are merged."""
+    crop = _bounding_box(mask, margin)
+    if crop is None:
+        return []
+    grown = _dilated(mask[crop], margin)
+    labels, _ = scipy.ndimage.label(grown, structure=np.ones((3, 3), int))
+    boxes = [tuple(slice(s.start + c.start, s.stop + c.start) for s, c in zip(b, crop, strict=True))
+             for b in scipy.ndimage.find_objects(labels) if b is not None]
+    merged = True
+    while merged and len(boxes) > 1:
+        merged = False
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                if all(s.start < t.stop and t.start < s.stop for s, t in zip(a, b, strict=True)):
+                    boxes[i] = tuple(slice(min(s.start, t.start), max(s.stop, t.stop)) for s, t in zip(a, b, strict=True))
+                    del boxes[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return boxes
+
+
+class VerifiedInference:
+    """Wrap an inference engine (capped H image -> phi image) with the residual check and
+    the local correction of :mod:`ifenn.verification` (module doc: the bound, the boxes).
+
+    ``inference``: the network engine (:class:`ifenn.process_zone.FullInference` or
+    :class:`~ifenn.process_zone.ProcessZoneInference`), called every step; with
+    ``warm_start="previous"`` it may be None (the network is not used).
+    Per call it records ``corrected_fraction`` (share of the image inside correction boxes),
+    ``residual_before`` / ``residual_after`` (max |r| over the image before and after the
+    correction), ``solve_work`` (CG iterations x box pixels / image pixels: the correction's
+    cost in whole-image iterations, independent of the machine's load), ``t_check`` and
+    ``t_correction`` (s), ``t_network`` and
+    ``evaluated_fraction`` (of the wrapped engine).
+    """
+
+    #: correction boxes covering more than this share of the image: one solve on the whole
+    #: image instead (its fast transform is exact there; the boxes would cost about as much)
+    GLOBAL_FRACTION = 0.5
+
+    def __init__(self, inference, equation: PixelEquation, tolerance: float = 1e-3, margin_lc: float = 6.0,
+                 max_rounds: int = 6, solve_fraction: float = 0.5, warm_start: str = "network"):
+        if warm_start not in WARM_STARTS:
+            raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
+        if warm_start != "previous" and inference is None:
+            raise ValueError("verification warm_start 'network' needs a network")
+        if not tolerance > 0:
+            raise ValueError(f"verification tolerance must be > 0, got {tolerance}")
+        self.inference, self.equation, self.tolerance = inference, equation, float(tolerance)
+        # the margin in pixels: a box's new values meet the old ones at its edge, where the
+        # Laplacian turns a jump delta into |r| ~ (Gc lc / h^2) / (Gc / lc) delta = (lc/h)^2 delta; the change
+        # of phi decays as exp(-d / lc), so after margin_lc lengths the jump is exp(-margin_lc) x the change
+        self.margin = int(np.ceil(float(margin_lc) * equation.lc / equation.h_px))
+        self.max_rounds, self.solve_fraction = int(max_rounds), float(solve_fraction)
+        self.warm_start = warm_start
+        self.keep_diagnostics = False   # keep the mask of failing pixels of the last call (``failing``)
+        self.failing_fraction = 0.0
+        self.kernel = getattr(inference, "kernel", "")
+        self.phi = None           # last verified phi image
+        self.residual = None      # its normalised residual
+        self.history = None       # the capped H it was verified for
+        self.prediction = None    # the network's last prediction (a copy)
+        self.t_network = self.t_check = self.t_correction = 0.0
+        self.evaluated_fraction = self.corrected_fraction = 0.0
+        self.residual_before = self.residual_after = 0.0
+        self.solve_iterations, self.solve_work = 0, 0.0
+
+    def start_from(self, phi: np.ndarray) -> None:
+        """The phase field the run continues from (the FEM state at the switch-over): the
+        'previous' warm start of the first step. The first call checks the whole image."""
+        if self.phi is None:
+            self.phi = np.array(phi, dtype=np.float64)
+
+    def _candidate(self, capped: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The warm start and the mask of pixels whose phi changed since the last verified
+        phi (None: check the whole image)."""
+        if self.warm_start == "previous":
+            self.t_network, self.evaluated_fraction = 0.0, 0.0
+            if self.phi is None:  # nothing to continue from: the local solution 2H / (Gc/lc + 2H)
+                return 2.0 * capped / (self.equation.reaction0 + 2.0 * capped), None
+            return self.phi.copy(), np.zeros(capped.shape, bool)
+        prediction = np.asarray(self.inference(capped), dtype=np.float64)
+        self.t_network, self.evaluated_fraction = self.inference.t_network, self.inference.evaluated_fraction
+        if self.prediction is None or self.phi is None or self.residual is None:
+            self.prediction = prediction.copy()
+            return prediction.copy(), None
+        # where the prediction did not change, the verified (corrected) phi stays
+        changed = prediction != self.prediction
+        candidate = self.phi.copy()
+        if self.warm_start == "increment":  # the network's change added to the verified phi
+            candidate[changed] += prediction[changed] - self.prediction[changed]
+        else:
+            candidate[changed] = prediction[changed]
+        self.prediction[changed] = prediction[changed]
+        return candidate, changed
+
+    def __call__(self, capped: np.ndarray) -> np.ndarray:
+        capped = np.asarray(capped, dtype=np.float64)
+        phi, changed_phi = self._candidate(capped)
+        started = time.perf_counter()
+        if changed_phi is None or self.residual is None or self.residual.shape != capped.shape:
+            residual = self.equation.residual_on(phi, capped, (slice(0, capped.shape[0]), slice(0, capped.shape[1])))
+        else:
+            # the residual changes only where H or phi (within one pixel) changed
+            stale = changed_phi | (capped != self.history)
+            residual = self.residual
+            box = _bounding_box(stale, 1)
+            if box is not None:  # one pass over the changes' bounding box (grown by the stencil)
+                residual[box] = self.equation.residual_on(phi, capped, box)
+        failing = np.abs(residual) > self.tolerance
+        self.residual_before = float(np.max(np.abs(residual), initial=0.0))
+        self.failing_fraction = float(np.count_nonzero(failing)) / failing.size
+        self.failing = failing.copy() if self.keep_diagnostics else None
+        self.t_check = time.perf_counter() - started
+        started = time.perf_counter()
+        corrected = np.zeros(capped.shape, bool)
+        self.solve_iterations = 0
+        self.solve_work = 0.0   # CG iterations x box pixels / image pixels: a load-independent cost
+        margin = self.margin
+        for _ in range(self.max_rounds):
+            if not failing.any():
+                break
+            boxes = _boxes(failing, margin)
+            if sum(box_area(box) for box in boxes) > self.GLOBAL_FRACTION * failing.size:
+                boxes = [(slice(0, failing.shape[0]), slice(0, failing.shape[1]))]
+            for box in boxes:
+                _, iterations = self.equation.solve_box(phi, capped, box, self.solve_fraction * self.tolerance)
+                self.solve_iterations += iterations
+                self.solve_work += iterations * box_area(box) / capped.size
+                corrected[box] = True
+                around = grow_box(box, 1, capped.shape)
+                residual[around] = self.equation.residual_on(phi, capped, around)
+            failing = np.abs(residual) > self.tolerance
+            margin *= 2
+        self.residual_after = float(np.max(np.abs(residual), initial=0.0))
+        self.corrected_fraction = float(np.count_nonzero(corrected)) / corrected.size
+        self.t_correction = time.perf_counter() - started
+        self.phi, self.residual, self.history = phi, residual, capped.copy()
+        return phi
