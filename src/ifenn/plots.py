@@ -393,3 +393,43 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
                   f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
     fig.suptitle(title, fontsize=9)
     _save(fig, path)
+
+
+ERROR_SOURCE_LABELS = {"pixel": "pixel eq.\nvs Q1 FEM", "cap": "H cap", "network": "network\nvs exact",
+                       "smoothing": "smoothing", "irreversibility": "max with FEM\nphi at switch",
+                       "published_step": "published\nstep (sum)", "staggering": "single pass\nvs converged"}
+
+
+def error_sources_figure(sources, path) -> None:
+    """Per run (columns): each source's force error over the FEM peak (top: RMS over the replayed
+    states as bars, signed mean as a black tick; %) and the largest |phi difference| between the
+    two variants it compares (bottom). ``sources``: the table of ifenn.error_sources.error_sources."""
+    runs = list(dict.fromkeys(sources.run))
+    fig, axes = plt.subplots(2, len(runs), figsize=(5.2 * len(runs), 7.5), squeeze=False, sharey="row")
+    colours = {"pixel": "tab:grey", "cap": "tab:purple", "network": "tab:red", "smoothing": "tab:blue",
+               "irreversibility": "tab:orange", "published_step": "k", "staggering": "tab:green"}
+    for column, run in enumerate(runs):
+        rows = sources[sources.run == run].set_index("source")
+        names = [s for s in ERROR_SOURCE_LABELS if s in rows.index]
+        x = np.arange(len(names))
+        top, bottom = axes[0, column], axes[1, column]
+        bars = top.bar(x, 100 * rows.loc[names, "force_rms"], color=[colours[s] for s in names], alpha=0.8)
+        top.scatter(x, 100 * rows.loc[names, "force_mean"], marker="_", s=300, color="k", zorder=3, label="signed mean")
+        for bar, value in zip(bars, rows.loc[names, "force_rms"], strict=True):
+            top.annotate(f"{100 * value:.1f}", (bar.get_x() + bar.get_width() / 2, bar.get_height()), ha="center",
+                         va="bottom", fontsize=7, xytext=(0, 2), textcoords="offset points")
+        top.axhline(0, color="k", lw=0.6)
+        first = rows.iloc[0]
+        top.set_title(f"{run} ({int(first.states)} FEM states replayed)\nwhole published run: post-switch RMS "
+                      f"{100 * first.postswitch_rms_error:.1f} %, final force {100 * first.final_force_ifenn:.1f} % "
+                      f"(FEM {100 * first.final_force_fem:.1f} %) of peak", fontsize=8)
+        top.set_ylabel("force error / FEM peak (%): RMS over states")
+        top.legend(fontsize=7, loc="upper left")
+        bottom.bar(x, rows.loc[names, "phi_max_abs"], color=[colours[s] for s in names], alpha=0.8)
+        bottom.set_ylabel("largest |phi difference| (pixels, over states)")
+        for ax in (top, bottom):
+            ax.set_xticks(x, [ERROR_SOURCE_LABELS[s] for s in names], fontsize=7)
+            ax.grid(True, axis="y", alpha=0.3)
+    fig.suptitle("Where IFENN's post-switch error comes from, replayed on the same FEM states: pixel equation, "
+                 "H cap, network, smoothing, irreversibility\n(their sum: the published step) and single-pass staggering", fontsize=9)
+    _save(fig, path)
