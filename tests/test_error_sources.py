@@ -130,3 +130,13 @@ def test_crack_band_min_and_postswitch_error():
     assert figures["postswitch_rms_error"] == pytest.approx(np.sqrt((1.0 + 4.0) / 2) / 10.0)
     assert figures["postswitch_max_error"] == pytest.approx(0.2)
     assert figures["final_force_ifenn"] == pytest.approx(0.2) and figures["final_force_fem"] == 0.0
+
+
+def test_without_network_or_ifenn_run_the_other_sources_remain(case):
+    """No model and no IFENN history (e.g. before training): pixel, cap and staggering are still
+    split off; the whole-run columns are nan."""
+    paths, _, _ = case
+    sources, states = error_sources([{**paths, "model": None, "ifenn_history": None}], stagger_max_iterations=5)
+    assert list(sources.source) == ["pixel", "cap", "staggering"]
+    assert set(states.variant) == {"fem", "exact_uncapped", "exact", "fem_one_more_pass", "fem_converged"}
+    assert sources.postswitch_rms_error.isna().all() and (sources.final_force_fem >= 0).all()

@@ -146,7 +146,8 @@ class Replay:
     """The problem of one IFENN run, set up once, replaying phase-field variants on FEM states.
 
     ``spec``: the IFENN run's resolved description (config.ifenn_run_spec, its spec.json);
-    ``mesh_path``: the scene's dolfinx mesh (XDMF); ``model_path``: the trained PICNN;
+    ``mesh_path``: the scene's dolfinx mesh (XDMF); ``model_path``: the trained PICNN (None: the
+    network variants and the sources that need them are left out);
     ``stagger_max_iterations``: cap of the converged staggering; ``crack_phi``: where FEM's
     crack is formed (phi_FEM >= this), for ``crack_band_min``.
     """
@@ -172,8 +173,10 @@ class Replay:
         # the published step, full image (process-zone inference reproduces it within its tolerance)
         published = {**copy.deepcopy(spec), "inference": "full"}
         shape = self.problem.pixels.shape
-        self.network_smoothed = make_inference(published, model_path, self.h_px, shape)
-        self.network_raw = make_inference({**published, "smoothing_sigma": None}, model_path, self.h_px, shape)
+        self.network_smoothed = self.network_raw = None
+        if model_path is not None:
+            self.network_smoothed = make_inference(published, model_path, self.h_px, shape)
+            self.network_raw = make_inference({**published, "smoothing_sigma": None}, model_path, self.h_px, shape)
 
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
@@ -232,15 +235,11 @@ class Replay:
         the switch-over, the floor of ``published``), and the staggering variants' pass counts."""
         history = state["history"]
         capped = self.capped(history)
-        raw = self.network_raw(capped)
-        fields = {
-            "fem": state["phase_field_gp"],
-            "exact_uncapped": self.exact(history),
-            "exact": self.exact(capped),
-            "network_raw": raw,
-            "network_smoothed": self.network_smoothed(capped),
-        }
-        fields["published"] = np.maximum(switch_phase_field, fields["network_smoothed"])
+        fields = {"fem": state["phase_field_gp"], "exact_uncapped": self.exact(history), "exact": self.exact(capped)}
+        if self.network_raw is not None:
+            fields["network_raw"] = self.network_raw(capped)
+            fields["network_smoothed"] = self.network_smoothed(capped)
+            fields["published"] = np.maximum(switch_phase_field, fields["network_smoothed"])
         one_more, converged, passes = self.staggered(state)
         fields.update(fem_one_more_pass=one_more, fem_converged=converged)
         return fields, {"fem_converged": passes, "fem_one_more_pass": 1}
@@ -255,7 +254,7 @@ class Replay:
         crack = reference >= self.crack_phi
         forces = {name: self.equilibrium_force(state, phi) for name, phi in fields.items()}
         rows = []
-        for name in VARIANTS:
+        for name in (v for v in VARIANTS if v in fields):
             phi = fields[name]
             difference = np.abs(phi - reference)
             rows.append({
@@ -280,6 +279,8 @@ def attribute(states: pd.DataFrame, fields: dict | None = None) -> list[dict]:
     :meth:`Replay.replay`; ``fields``: {increment: {variant: phi map}} (None: phi columns nan)."""
     rows = []
     for source, (start, end) in SOURCES.items():
+        if not {start, end} <= set(states.variant):
+            continue
         a = states[states.variant == start].set_index("increment")
         b = states[states.variant == end].set_index("increment")
         delta = b.force_fraction - a.force_fraction
@@ -298,7 +299,8 @@ def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi
 
     A case is a dict of paths: ``spec`` (the IFENN run's spec.json), ``mesh`` (the scene's XDMF),
     ``fem_dir`` (its FEM run: fields.h5, history.csv), ``ifenn_history`` (the published IFENN
-    run's history.csv, for the whole-run context) and ``model`` (the trained PICNN).
+    run's history.csv, for the whole-run context; absent or None: those columns are nan) and
+    ``model`` (the trained PICNN; absent or None: no network variants).
     Returns (sources, states): one row per run and source (attribute() columns + the run's
     post-switch context, postswitch_error()), and one row per run, replayed state and variant
     (Replay.replay columns). Fractions of the FEM peak, see the module docstring.
@@ -308,15 +310,21 @@ def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi
         spec = json.loads(Path(case["spec"]).read_text())
         fem_dir = Path(case["fem_dir"])
         fem_history = pd.read_csv(fem_dir / "history.csv")
-        context = {"run": spec["name"], "fem_run": spec["fem_run"],
-                   **postswitch_error(pd.read_csv(case["ifenn_history"]), fem_history)}
+        if case.get("ifenn_history"):
+            figures = postswitch_error(pd.read_csv(case["ifenn_history"]), fem_history)
+        else:
+            figures = {**dict.fromkeys(("u_switch", "postswitch_increments", "postswitch_rms_error", "postswitch_max_error",
+                                        "final_force_ifenn"), np.nan),
+                       "fem_peak_force": float(fem_history.reaction_force.abs().max()),
+                       "final_force_fem": float(abs(fem_history.reaction_force.iloc[-1]) / fem_history.reaction_force.abs().max())}
+        context = {"run": spec["name"], "fem_run": spec["fem_run"], **figures}
         peak = context["fem_peak_force"]
         switch, _, states = saved_states(fem_dir / "fields.h5")
         switch_phase_field = switch_state(fem_dir)[1]["phase_field_gp"]
         if not states:
             raise ValueError(f"FEM run {fem_dir} saved no state after its switch-over increment {switch}: nothing to replay")
         log.info("%s: %d FEM states after the switch-over increment %d", spec["name"], len(states), switch)
-        replay = Replay(spec, case["mesh"], case["model"], stagger_max_iterations, crack_phi)
+        replay = Replay(spec, case["mesh"], case.get("model"), stagger_max_iterations, crack_phi)
         recorded = fem_history.set_index("increment").reaction_force
         run_rows, run_fields = [], {}
         for state in states:
