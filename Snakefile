@@ -30,6 +30,7 @@ include: "workflow/rules/ifenn.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/stability.smk"
+include: "workflow/rules/error_sources.smk"
 
 
 rule all:
@@ -51,3 +52,4 @@ rule all:
         ["results/tables/stability.csv", "results/figures/stability_map.png"] if config.get("stability") else [],
         ["results/tables/speed_accuracy.csv", "results/figures/speed_accuracy.png"] if config.get("speed_accuracy") else [],
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],
+        ["results/tables/error_sources.csv", "results/figures/error_sources.png"] if config.get("error_sources") else [],

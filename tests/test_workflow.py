@@ -78,6 +78,23 @@ def test_quick_profile_issue5_results(quick_workflow):
     assert ((final.ifenn_full - final.ifenn_full_convolution).abs() < 1e-3 * final.fem).all()
 
 
+def test_quick_profile_error_sources(quick_workflow):
+    """The error split (issue 12) has every source of every configured run; its parts add up to the
+    published step; replaying the published step on FEM's states lands near the whole run's error."""
+    from ifenn.error_sources import PUBLISHED_PARTS, SOURCES
+
+    results = quick_workflow / "results"
+    sources = pd.read_csv(results / "tables" / "error_sources.csv")
+    assert set(sources.run) == {"snt1-II", "adnt"} and set(sources.source) == set(SOURCES)
+    for _, rows in sources.groupby("run"):
+        rows = rows.set_index("source")
+        assert abs(rows.loc[list(PUBLISHED_PARTS), "force_mean"].sum() - rows.loc["published_step", "force_mean"]) < 1e-9
+        assert (rows.states >= 2).all() and (rows.postswitch_rms_error > 0).all()
+    states = pd.read_csv(results / "tables" / "error_sources_states.csv")
+    assert (states[states.variant == "fem"].force_vs_fem == 0).all()
+    assert (results / "figures" / "error_sources.png").stat().st_size > 10_000
+
+
 def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_workflow, tmp_path):
     override = tmp_path / "override.yaml"
     override.write_text("ifenn:\n  smoothing_sigma: 1.0\n")

@@ -196,6 +196,13 @@ def _semantic_problems(config: dict) -> list[str]:
     for run in config.get("phase_field_benchmark", {}).get("runs", []):
         if run not in config.get("ifenn_runs", {}):
             problems.append(f"config key 'phase_field_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    for run in config.get("error_sources", {}).get("runs", []):
+        entry = config.get("ifenn_runs", {}).get(run)
+        if entry is None:
+            problems.append(f"config key 'error_sources.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+        elif entry.get("predictor", config["ifenn"]["predictor"]) != "picnn":
+            problems.append(f"config key 'error_sources.runs': '{run}' does not use the PICNN (predictor "
+                            f"'{entry.get('predictor', config['ifenn']['predictor'])}'): there is no network error to split off")
     sweep = config.get("stability")
     if sweep:
         if sweep["scene"] not in config["scenes"]:

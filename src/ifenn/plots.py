@@ -404,3 +404,53 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
                   f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
     fig.suptitle(title, fontsize=9)
     _save(fig, path)
+
+
+ERROR_SOURCE_LABELS = {"pixel": "pixel equation vs Q1 FEM", "cap": "H cap", "network": "network vs exact pixel solve",
+                       "smoothing": "Gaussian smoothing", "irreversibility": "max with FEM phi at switch-over",
+                       "published_step": "published step (sum of the above)", "staggering": "single pass vs converged (FEM)"}
+ERROR_SOURCE_COLOURS = {"pixel": "tab:grey", "cap": "tab:purple", "network": "tab:red", "smoothing": "tab:blue",
+                        "irreversibility": "tab:orange", "published_step": "k", "staggering": "tab:green"}
+
+
+def error_sources_figure(sources, path) -> None:
+    """Per run (rows): each source's force error over the FEM peak (left: the signed mean over the
+    replayed states as bars, additive, so the parts sum to the published step; the RMS as diamonds;
+    %) and the largest |phi difference| between the two variants it compares (right).
+    ``sources``: the table of ifenn.error_sources.error_sources."""
+    runs = list(dict.fromkeys(sources.run))
+    fig, axes = plt.subplots(len(runs), 2, figsize=(12, 3.4 * len(runs) + 0.8), squeeze=False,
+                             gridspec_kw={"width_ratios": [2, 1]})
+    for (left, right), run in zip(axes, runs, strict=True):
+        rows = sources[sources.run == run].set_index("source")
+        names = [s for s in ERROR_SOURCE_LABELS if s in rows.index]
+        y = np.arange(len(names))[::-1]
+        colours = [ERROR_SOURCE_COLOURS[s] for s in names]
+        mean, rms = 100 * rows.loc[names, "force_mean"].to_numpy(), 100 * rows.loc[names, "force_rms"].to_numpy()
+        left.barh(y, mean, color=colours, alpha=0.8, label="signed mean over states")
+        left.scatter(rms, y, marker="D", s=28, facecolor="white", edgecolor="k", zorder=3, label="RMS over states")
+        for yy, m, r in zip(y, mean, rms, strict=True):
+            left.annotate(f"{m:+.1f} (RMS {r:.1f})", (max(m, r, 0.0), yy), xytext=(6, 0), textcoords="offset points",
+                          va="center", fontsize=7)
+        left.axvline(0, color="k", lw=0.6)
+        left.set_yticks(y, [ERROR_SOURCE_LABELS[s] for s in names], fontsize=8)
+        left.set_xlabel("force difference / FEM peak (%)")
+        lo, hi = min(mean.min(), 0.0), max(mean.max(), rms.max(), 0.0)
+        left.set_xlim(lo - 0.05 * (hi - lo + 1e-9), hi + 0.35 * (hi - lo + 1e-9))
+        first = rows.iloc[0]
+        left.set_title(f"{run}: {int(first.states)} FEM states after the switch-over replayed. Whole published run: "
+                       f"post-switch RMS error {100 * first.postswitch_rms_error:.1f} %,\nfinal force "
+                       f"{100 * first.final_force_ifenn:.1f} % of the FEM peak (FEM {100 * first.final_force_fem:.1f} %)",
+                       fontsize=8, loc="left")
+        left.legend(fontsize=7, loc="lower right")
+        right.barh(y, rows.loc[names, "phi_max_abs"], color=colours, alpha=0.8)
+        right.set_yticks(y, [])
+        right.set_xlabel("largest |phi difference| (pixels, all states)")
+        right.set_title("phase field", fontsize=8)
+        for ax in (left, right):
+            ax.grid(True, axis="x", alpha=0.3)
+    fig.suptitle("Where IFENN's post-switch error comes from, replayed on the same FEM states: pixel equation, H cap, "
+                 "network, smoothing,\nirreversibility (together: the published step) and single-pass staggering",
+                 fontsize=10)
+    fig.tight_layout()
+    _save(fig, path)

@@ -93,3 +93,22 @@ def all_cores(wildcards):
         return workflow.cores
     except WorkflowError:
         return 1
+
+
+def error_sources_cases(wildcards):
+    """Per run: its spec, mesh, FEM run folder, published IFENN history and the network."""
+    cases = []
+    for run in config["error_sources"]["runs"]:
+        fem_run = config["ifenn_runs"][run]["fem_run"]
+        cases.append({"spec": f"results/ifenn/{run}/spec.json", "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
+                      "fem_dir": f"results/fem/{fem_run}", "ifenn_history": f"results/ifenn/{run}/history.csv",
+                      "model": "results/picnn/model.pt"})
+    return cases
+
+
+def error_sources_inputs(wildcards):
+    paths = set()
+    for case in error_sources_cases(wildcards):
+        paths |= {case["spec"], case["mesh"], case["ifenn_history"], case["model"],
+                  f"{case['fem_dir']}/fields.h5", f"{case['fem_dir']}/history.csv"}
+    return sorted(paths)

@@ -1,0 +1,22 @@
+"""Adapter: IFENN runs, their FEM states and the network -> ifenn.error_sources tables and figure."""
+import logging
+import os
+import sys
+
+snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_stream = open(snakemake.log[0], "w", buffering=1)  # noqa: SIM115 (open for the whole script)
+sys.stderr = log_stream
+logging.basicConfig(stream=log_stream, level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
+
+import torch  # noqa: E402
+
+from ifenn.error_sources import error_sources  # noqa: E402
+from ifenn.io import write_csv  # noqa: E402
+from ifenn.plots import error_sources_figure  # noqa: E402
+
+torch.set_num_threads(snakemake.threads)
+sources, states = error_sources(snakemake.params.cases, snakemake.params.stagger_max_iterations, snakemake.params.crack_phi)
+write_csv(snakemake.output.states, states)
+write_csv(snakemake.output.table, sources)
+error_sources_figure(sources, snakemake.output.figure)
