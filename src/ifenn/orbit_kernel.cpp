@@ -217,6 +217,29 @@ void ifenn_dilate(const uint8_t* in, uint8_t* out, uint8_t* tmp, int h, int w, i
     }
 }
 
-int ifenn_kernel_version() { return 2; }
+// The pixel phase-field operator of ifenn/verification.py on an n x m box, in one pass:
+// out = a * c - D * (K9*(c) - 3 c) - 2 H, with c the centre of ``ext`` ((n + 2) x (m + 2),
+// the box with its one-pixel frame, row-major), a = a0 + 2 H and H on the box (n x m);
+// with has_rhs = 0 the -2 H term is left out (the operator alone, for the conjugate gradients).
+void ifenn_pixel_operator(const double* ext, const double* history, double* out, int n, int m, double a0, double D,
+                          int has_rhs) {
+    const int64_t stride = m + 2;
+    for (int i = 0; i < n; ++i) {
+        const double* up = ext + static_cast<int64_t>(i) * stride;
+        const double* mid = up + stride;
+        const double* down = mid + stride;
+        const double* h = history + static_cast<int64_t>(i) * m;
+        double* o = out + static_cast<int64_t>(i) * m;
+        for (int j = 0; j < m; ++j) {
+            const double c = mid[j + 1];
+            const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+            const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+            const double a = a0 + 2.0 * h[j];
+            o[j] = a * c - D * (0.5 * edge + 0.25 * corner - 3.0 * c) - (has_rhs ? 2.0 * h[j] : 0.0);
+        }
+    }
+}
+
+int ifenn_kernel_version() { return 3; }
 
 }

@@ -1,4 +1,5 @@
-"""The compiled orbit layer (orbit_kernel.cpp): built at first use, loaded with ctypes.
+"""The compiled orbit layer and pixel operator (orbit_kernel.cpp): built at first use, loaded
+with ctypes.
 
 ``load()`` returns the library, or None where it cannot be had (no C++ compiler, a failed
 build, or ``IFENN_KERNEL=0`` in the environment); callers then use the torch path of
@@ -25,7 +26,7 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("orbit_kernel.cpp")
 FLAGS = ("-O3", "-march=native", "-std=c++17", "-shared", "-fPIC")
-VERSION = 2
+VERSION = 3
 #: floats after the last pixel of every buffer handed to the kernel (a chunk reads past a run's end)
 SLACK = 64
 ACTIVATIONS = {"none": 0, "tanh": 1, "sigmoid": 2}
@@ -80,6 +81,8 @@ def load() -> ctypes.CDLL | None:
     lib.ifenn_orbit_layer.restype = integer
     lib.ifenn_dilate.argtypes = [pointer, pointer, pointer, integer, integer, integer]
     lib.ifenn_dilate.restype = None
+    lib.ifenn_pixel_operator.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, ctypes.c_double, integer]
+    lib.ifenn_pixel_operator.restype = None
     lib.ifenn_kernel_version.restype = integer
     if lib.ifenn_kernel_version() != VERSION:
         warnings.warn(f"{SOURCE.name}: version mismatch, using the torch orbit path", stacklevel=2)

@@ -71,6 +71,12 @@ from .pixels import Box, box_area, grow_box
 
 log = logging.getLogger(__name__)
 
+
+def _kernel():
+    from .orbit_kernel import load
+
+    return load()
+
 WARM_STARTS = ("network", "increment", "previous")
 
 
@@ -111,33 +117,38 @@ class PixelEquation:
 
     def _extended(self, phi: np.ndarray, box: Box) -> np.ndarray:
         """phi on ``box`` with a one-pixel frame: image values where the box is inside, the
-        padding where it meets the image edge."""
+        padding where it meets the image edge (float64, contiguous)."""
         (r0, r1), (c0, c1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
         ny, nx = phi.shape
-        rows = np.clip(np.arange(r0 - 1, r1 + 1), 0, ny - 1)
-        cols = np.clip(np.arange(c0 - 1, c1 + 1), 0, nx - 1)
-        ext = phi[np.ix_(rows, cols)].astype(np.float64)
-        if self.padding == "zeros":
-            if r0 == 0:
-                ext[0, :] = 0.0
-            if r1 == ny:
-                ext[-1, :] = 0.0
-            if c0 == 0:
-                ext[:, 0] = 0.0
-            if c1 == nx:
-                ext[:, -1] = 0.0
-        return ext
+        inner = phi[max(r0 - 1, 0):min(r1 + 1, ny), max(c0 - 1, 0):min(c1 + 1, nx)]
+        widths = ((int(r0 == 0), int(r1 == ny)), (int(c0 == 0), int(c1 == nx)))
+        if not any(any(w) for w in widths):
+            return np.array(inner, dtype=np.float64)
+        return np.pad(inner.astype(np.float64, copy=False), widths, mode="edge" if self.padding == "replicate" else "constant")
+
+    def _operator(self, ext: np.ndarray, history: np.ndarray, with_rhs: bool) -> np.ndarray:
+        """(a c - D (K9*(c) - 3 c) [- 2 H]) for the centre c of ``ext``, a = Gc/lc + 2 H; in the
+        compiled kernel where it builds (one pass), else in numpy."""
+        lib = _kernel()
+        if lib is not None:
+            ext = np.ascontiguousarray(ext, dtype=np.float64)
+            history = np.ascontiguousarray(history, dtype=np.float64)
+            out = np.empty(history.shape)
+            lib.ifenn_pixel_operator(ext.ctypes.data, history.ctypes.data, out.ctypes.data, history.shape[0], history.shape[1],
+                                     self.reaction0, self.diffusion, int(with_rhs))
+            return out
+        centre = ext[1:-1, 1:-1]
+        out = (self.reaction0 + 2.0 * history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
+        return out - 2.0 * history if with_rhs else out
 
     def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box) -> np.ndarray:
         """Normalised residual r on ``box`` (its own shape)."""
-        ext = self._extended(phi, box)
-        centre = ext[1:-1, 1:-1]
-        reaction = self.reaction0 + 2.0 * history[box]
-        raw = reaction * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre) - 2.0 * history[box]
-        return raw / reaction
+        h = history[box]
+        return self._operator(self._extended(phi, box), h, True) / (self.reaction0 + 2.0 * h)
 
-    def _apply(self, x: np.ndarray, reaction: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
-        """A x on a box for x with zero Dirichlet data around it (padding on image edges)."""
+    def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
+        """A x on a box (``history``: H there) for x with zero Dirichlet data around it (the
+        padding on image edges)."""
         ext = np.zeros((x.shape[0] + 2, x.shape[1] + 2))
         ext[1:-1, 1:-1] = x
         if self.padding == "replicate":
@@ -150,7 +161,7 @@ class PixelEquation:
                 ext[:, 0] = ext[:, 1]
             if right:
                 ext[:, -1] = ext[:, -2]
-        return reaction * x - self.diffusion * (_stencil_sum(ext) - 3.0 * x)
+        return self._operator(ext, history, False)
 
     def _preconditioner(self, box: Box, shape: tuple[int, int], reaction: np.ndarray):
         """The exact inverse of the constant-coefficient operator min(a) I - D (K9* - 3 I) on
@@ -175,11 +186,12 @@ class PixelEquation:
         iterations); raises if ``maxiter`` iterations do not get there."""
         ny, nx = phi.shape
         edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
-        reaction = self.reaction0 + 2.0 * history[box]
+        h = np.ascontiguousarray(history[box])
+        reaction = self.reaction0 + 2.0 * h
         ext = self._extended(phi, box)
         centre = ext[1:-1, 1:-1]
         # the correction delta solves A delta = -R(phi), zero around the box
-        residual = -(reaction * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre) - 2.0 * history[box])
+        residual = -self._operator(ext, h, True)
         worst = float(np.max(np.abs(residual) / reaction))
         iterations = 0
         delta = np.zeros_like(centre)
@@ -193,7 +205,7 @@ class PixelEquation:
                     raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                        f"(reached {worst:g})")
                 iterations += 1
-                a_dir = self._apply(direction, reaction, edges)
+                a_dir = self._apply(direction, h, edges)
                 alpha = rz / float(np.vdot(direction, a_dir))
                 delta += alpha * direction
                 residual -= alpha * a_dir
