@@ -51,3 +51,4 @@ rule all:
         ["results/tables/stability.csv", "results/figures/stability_map.png"] if config.get("stability") else [],
         ["results/tables/speed_accuracy.csv", "results/figures/speed_accuracy.png"] if config.get("speed_accuracy") else [],
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],
+        "results/benchmarks/increment_speed.csv" if config.get("increment_benchmark") else [],

@@ -35,7 +35,6 @@ import pandas as pd
 
 from ifenn.config import REPO, ifenn_run_spec, load_config
 
-log = logging.getLogger("increment_speed")
 COLUMNS = ["run", "method", "displacement_solver", "t_displacement_s", "t_phase_field_s", "t_increment_s",
            "force_rel_error_vs_direct", "increments", "displacement_iterations", "preconditioner_refreshes"]
 
@@ -87,21 +86,19 @@ class Case:
         self.last, self.u_previous = increment, row["u"]
 
 
-def increment_speed(config: dict, runs: list[str], solvers: dict[str, str], methods: list[str], increments: int,
+def increment_speed(specs: list[dict], solvers: dict[str, tuple[str, dict]], methods: list[str], increments: int,
                     model_path: str | Path, results: str | Path = "results") -> pd.DataFrame:
-    """One row per (run, method, solver); ``runs``: IFENN runs (their FEM runs give the start
-    state, the mesh and the peak force); ``solvers``: column label -> linear-solver preset."""
+    """One row per (run, method, solver); ``specs``: IFENN run specs with process-zone settings
+    (their FEM runs give the start state, the mesh and the peak force); ``solvers``: column
+    label -> (preset name, preset: its PETSc options and displacement_reuse)."""
     from ifenn.hybrid import switch_state
     from ifenn.mesh import read_dolfinx_mesh
 
     results = Path(results)
-    presets = config["solver"]["linear_solver_presets"]
     table = []
     with tempfile.TemporaryDirectory() as tmp:
-        for run in runs:
-            spec = ifenn_run_spec(config, run)
-            spec.update(process_zone=spec.get("process_zone") or config["ifenn"]["process_zone"], save_fields=[],
-                        checkpoint_every=10**6)
+        for spec in specs:
+            spec = {**spec, "save_fields": [], "checkpoint_every": 10**6}
             fem_dir = results / "fem" / spec["fem_run"]
             switch, state, rows = switch_state(fem_dir)
             if switch < 0:
@@ -111,9 +108,9 @@ def increment_speed(config: dict, runs: list[str], solvers: dict[str, str], meth
             domain = read_dolfinx_mesh(results / "mesh" / f"{spec['scene_name']}.xdmf")
             cases = []
             for method in methods:
-                for label, preset in solvers.items():
+                for label, (preset, options) in solvers.items():
                     case_spec = copy.deepcopy(spec)
-                    case_spec.update(name=f"{spec['fem_run']}-{method}-{label}", linear_solvers=preset, petsc=presets[preset])
+                    case_spec.update(name=f"{spec['fem_run']}-{method}-{label}", linear_solvers=preset, petsc=options)
                     start = {"increment": switch, "state": state, "rows": rows}
                     cases.append(Case(case_spec, domain, method, label, start, model_path, Path(tmp)))
             n = len(spec["load"]) - switch
@@ -121,7 +118,7 @@ def increment_speed(config: dict, runs: list[str], solvers: dict[str, str], meth
             for k in range(n):  # interleaved: every case takes increment k before any takes k + 1
                 for case in cases:
                     case.advance()
-                log.info("%s: increment %d/%d (%.0f s)", spec["fem_run"], k + 1, n, time.perf_counter() - started)
+                print(f"{spec['fem_run']}: increment {k + 1}/{n} ({time.perf_counter() - started:.0f} s)", flush=True)
             direct = {c.method: pd.DataFrame(c.rows).reaction_force.to_numpy() for c in cases if c.solver == "direct"}
             for case in cases:
                 history = pd.DataFrame(case.rows)
@@ -158,6 +155,10 @@ def main() -> int:
     parser.add_argument("--model", default="results/picnn/model.pt")
     parser.add_argument("--results", default="results", help="folder with fem/ and mesh/ of the workflow")
     parser.add_argument("--runs", nargs="+", default=None, help="IFENN runs; default: increment_benchmark.runs")
+    parser.add_argument("--specs", nargs="+", default=None, help="IFENN run specs (results/ifenn/RUN/spec.json) instead of --runs")
+    parser.add_argument("--solvers", default=None, help="JSON {label: [preset, options]}; default: increment_benchmark.solvers of --config")
+    parser.add_argument("--new-solver", default=None, help="label of the solver whose ratios are printed")
+    parser.add_argument("--process-zone", default=None, help="JSON of the process-zone settings; default: ifenn.process_zone of --config")
     parser.add_argument("--increments", type=int, default=None, help="default: increment_benchmark.increments")
     parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     parser.add_argument("--out", default="results/benchmarks/increment_speed.csv")
@@ -170,14 +171,23 @@ def main() -> int:
     torch.set_num_threads(1)
     config = load_config(*args.config)
     setup = config["increment_benchmark"]
-    table = increment_speed(config, args.runs or setup["runs"], setup["solvers"], args.methods, args.increments or setup["increments"],
-                            args.model, args.results)
+    if args.specs:
+        specs = [json.loads(Path(path).read_text()) for path in args.specs]
+    else:
+        specs = [ifenn_run_spec(config, run) for run in args.runs or setup["runs"]]
+    zone = json.loads(args.process_zone) if args.process_zone else config["ifenn"]["process_zone"]
+    for spec in specs:   # the process-zone settings, where a run does not carry them itself
+        spec["process_zone"] = spec.get("process_zone") or zone
+    presets = config["solver"]["linear_solver_presets"]
+    solvers = json.loads(args.solvers) if args.solvers else {label: (name, presets[name]) for label, name in setup["solvers"].items()}
+    new_solver = args.new_solver or setup["new_solver"]
+    table = increment_speed(specs, solvers, args.methods, args.increments or setup["increments"], args.model, args.results)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 220, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
         print("\nSeconds per increment (mean over the increments after the switch-over), interleaved in one process:")
         print(table.to_string(index=False))
-        print(f"\nRatios (same process, same states):\n{ratios(table, setup['new_solver']).to_string(index=False)}")
+        print(f"\nRatios (same process, same states):\n{ratios(table, new_solver).to_string(index=False)}")
     print(json.dumps({"written": args.out}))
     return 0
 
