@@ -53,3 +53,4 @@ rule all:
         ["results/tables/speed_accuracy.csv", "results/figures/speed_accuracy.png"] if config.get("speed_accuracy") else [],
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],
         ["results/tables/error_sources.csv", "results/figures/error_sources.png"] if config.get("error_sources") else [],
+        "results/benchmarks/increment_speed.csv" if config.get("increment_benchmark") else [],

@@ -112,6 +112,10 @@ def _semantic_problems(config: dict) -> list[str]:
             f"config key 'solver.linear_solvers': '{config['solver']['linear_solvers']}' "
             f"is not a preset; allowed: {sorted(presets)}"
         )
+    for name, preset in presets.items():
+        if "displacement_reuse" in preset and preset["displacement"].get("ksp_type", "gmres") == "preonly":
+            problems.append(f"config key 'solver.linear_solver_presets.{name}.displacement_reuse': a kept preconditioner "
+                            "needs a Krylov solve (ksp_type cg, ...), got ksp_type 'preonly'")
     for name, scene in config["scenes"].items():
         key = f"scenes.{name}"
         (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
@@ -203,6 +207,18 @@ def _semantic_problems(config: dict) -> list[str]:
         elif entry.get("predictor", config["ifenn"]["predictor"]) != "picnn":
             problems.append(f"config key 'error_sources.runs': '{run}' does not use the PICNN (predictor "
                             f"'{entry.get('predictor', config['ifenn']['predictor'])}'): there is no network error to split off")
+    bench = config.get("increment_benchmark")
+    if bench:
+        for run in bench["runs"]:
+            if run not in config.get("ifenn_runs", {}):
+                problems.append(f"config key 'increment_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+        for label, preset in bench["solvers"].items():
+            if preset not in presets:
+                problems.append(f"config key 'increment_benchmark.solvers.{label}': '{preset}' is not a preset; allowed: {sorted(presets)}")
+        missing = {"gamg", "direct", bench["new_solver"]} - set(bench["solvers"])
+        if missing:
+            problems.append(f"config key 'increment_benchmark.solvers': labels {sorted(missing)} are missing "
+                            "(gamg: the baseline, direct: the force reference, and new_solver)")
     sweep = config.get("stability")
     if sweep:
         if sweep["scene"] not in config["scenes"]:

@@ -8,10 +8,13 @@ phase field used in the degradation) live in a Quadrature space with 2x2 points.
 
 from __future__ import annotations
 
+import contextlib
+
 import basix
 import numpy as np
 import ufl
-from dolfinx import fem, la
+from dolfinx import cpp as dcpp
+from dolfinx import fem, jit, la
 from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
@@ -34,12 +37,23 @@ _REASONS = {getattr(PETSc.KSP.ConvergedReason, k): k for k in dir(PETSc.KSP.Conv
 def configure_ksp(ksp: PETSc.KSP, prefix: str, options: dict) -> None:
     """Apply a dictionary of PETSc options under ``prefix`` (the one place solvers are set)."""
     ksp.setOptionsPrefix(prefix)
+    with petsc_options(prefix, options):
+        ksp.setFromOptions()
+
+
+@contextlib.contextmanager
+def petsc_options(prefix: str, options: dict):
+    """PETSc's options database holds ``options`` under ``prefix`` inside the block only.
+    Options read when a preconditioner is set up (GAMG's ``mg_levels_*`` smoothers) need them
+    there during that set-up, not only during setFromOptions."""
     opts = PETSc.Options()
     for key, value in options.items():
         opts[f"{prefix}{key}"] = value
-    ksp.setFromOptions()
-    for key in options:
-        del opts[f"{prefix}{key}"]
+    try:
+        yield
+    finally:
+        for key in options:
+            del opts[f"{prefix}{key}"]
 
 
 def check_converged(ksp: PETSc.KSP, what: str) -> int:
@@ -72,6 +86,122 @@ def rigid_body_modes(V) -> PETSc.NullSpace:
         b2.array[1 : bs * n_local : bs] = x[:, 0]
     la.orthonormalize(basis)
     return PETSc.NullSpace().create(vectors=basis)
+
+
+class IncrementalStiffness:
+    """The equilibrium matrix kept up to date by assembling only what changed.
+
+    A(g) = sum over Gauss points of g(phi_q) K_q is linear in the degradation at each Gauss
+    point. ``assembled`` holds the phi (Gauss points) the matrix was last assembled with; an
+    update assembles K(g(phi)) - K(g(phi_assembled)) over the cells where g moved, at one of
+    their Gauss points, by more than ``tolerance`` times itself (0: any change) and adds it into
+    the matrix, so the matrix is that of a degradation within a factor (1 +- tolerance) of the
+    current one at every Gauss point (exact with tolerance 0, to round-off): the solution of
+    the matrix used is within ~tolerance of the exact one in the energy norm. Relative, not
+    absolute: in the crack g is near 0 and a small absolute change is a large one there.
+    Rows and columns of Dirichlet dofs are left out of the difference (they keep the 1 on the
+    diagonal of the full assembly).
+    """
+
+    def __init__(self, problem: FractureProblem, tolerance: float):
+        self.problem, self.tolerance = problem, float(tolerance)
+        self.assembled = fem.Function(problem.Q, name="phase_field_assembled")
+        domain = problem.domain
+        u, v = ufl.TrialFunction(problem.V), ufl.TestFunction(problem.V)
+        difference = (physics.equilibrium_form(u, v, problem.phase_field_gp, problem.material)
+                      - physics.equilibrium_form(u, v, self.assembled, problem.material))
+        self._tdim = domain.topology.dim
+        nothing = dmesh.meshtags(domain, self._tdim, np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int32))
+        self._form = difference * ufl.Measure("dx", domain=domain, metadata=QUADRATURE, subdomain_data=nothing)(1)
+        # compiled once; each update only builds a dolfinx Form over the changed cells
+        self._ufcx, module, _ = jit.ffcx_jit(domain.comm, self._form, form_compiler_params={"scalar_type": "double"})
+        self._pointer = int(module.ffi.cast("uintptr_t", module.ffi.addressof(self._ufcx)))
+        coefficients = self._form.coefficients()
+        self._coefficients = [coefficients[self._ufcx.original_coefficient_position[i]]._cpp_object
+                              for i in range(self._ufcx.num_coefficients)]
+        self._spaces = [problem.V._cpp_object, problem.V._cpp_object]
+        self._mesh = domain.ufl_domain().ufl_cargo()   # the C++ mesh, as dolfinx.fem.form passes it
+        self.full_assemblies = 0
+        self.changed_cells = 0   # of the last update
+
+    def degradation(self, phase_field: np.ndarray) -> np.ndarray:
+        return (1.0 - phase_field) ** 2 + self.problem.material["residual_stiffness"]
+
+    def assemble_full(self, A: PETSc.Mat) -> None:
+        p = self.problem
+        A.zeroEntries()
+        fem_petsc.assemble_matrix(A, p.equilibrium_form, bcs=p.bcs)
+        A.assemble()
+        self.assembled.x.array[:] = p.phase_field_gp.x.array
+        self.full_assemblies += 1
+        self.changed_cells = p.n_cells_owned
+
+    def update(self, A: PETSc.Mat) -> int:
+        """Add the stiffness change of the cells whose degradation moved; returns their number."""
+        p = self.problem
+        q = p.q_dofs[: p.n_cells_owned]
+        g_now, g_then = self.degradation(p.phase_field_gp.x.array[q]), self.degradation(self.assembled.x.array[q])
+        moved = np.abs(g_now - g_then) > self.tolerance * np.maximum(g_now, g_then)
+        cells = np.flatnonzero(moved.any(axis=1)).astype(np.int32)
+        self.changed_cells = len(cells)
+        if p.comm.allreduce(len(cells), op=MPI.SUM) == 0:
+            return 0
+        tags = dmesh.meshtags(p.domain, self._tdim, cells, np.ones(len(cells), dtype=np.int32))
+        subdomains = {dcpp.fem.IntegralType.cell: tags, dcpp.fem.IntegralType.exterior_facet: None,
+                      dcpp.fem.IntegralType.interior_facet: None, dcpp.fem.IntegralType.vertex: None}
+        form = dcpp.fem.Form_float64(self._pointer, self._spaces, self._coefficients, [], subdomains, self._mesh)
+        dcpp.fem.petsc.assemble_matrix(A, form, dcpp.fem.pack_constants(form), dcpp.fem.pack_coefficients(form), p.bcs)
+        A.assemble()
+        self.assembled.x.array[q[cells]] = p.phase_field_gp.x.array[q[cells]]
+        return len(cells)
+
+    def relative_change(self, reference: np.ndarray) -> float:
+        """sum |g(phi_assembled) - g(reference)| / sum g(reference) over the owned Gauss points
+        (``reference``: a phi array of the same layout): the share of the stiffness that moved."""
+        p = self.problem
+        owned = p.owned_q_dofs
+        g_now, g_then = self.degradation(self.assembled.x.array[owned]), self.degradation(reference[owned])
+        moved = p.comm.allreduce(float(np.abs(g_now - g_then).sum()), op=MPI.SUM)
+        total = p.comm.allreduce(float(g_then.sum()), op=MPI.SUM)
+        return moved / total if total > 0 else 0.0
+
+
+class PreconditionerReuse:
+    """When the displacement preconditioner is rebuilt (a preset's ``displacement_reuse``).
+
+    The preconditioner (e.g. the GAMG hierarchy) built for one matrix is kept for the following
+    solves, whose operator is always the current matrix (only the preconditioner is stale, so a
+    converged solve is as accurate as with a fresh one). It is rebuilt before a solve when the
+    previous solve took more than ``refresh_iterations`` Krylov iterations, or when the stiffness
+    moved, since it was built, by more than ``refresh_stiffness_change`` (relative L1 change of
+    g(phi) over the Gauss points, see IncrementalStiffness.relative_change); and a solve that did
+    not converge with a kept preconditioner is redone once with a fresh one.
+    """
+
+    def __init__(self, settings: dict):
+        self.max_iterations = int(settings["refresh_iterations"])
+        self.max_change = float(settings["refresh_stiffness_change"])
+        self.refreshes = 0
+        self.reasons: list[str] = []          # why each refresh happened (first, iterations, stiffness, diverged)
+        self._built_with: np.ndarray | None = None
+        self._last_iterations = 0
+
+    def needs_refresh(self, stiffness: IncrementalStiffness) -> str | None:
+        if self._built_with is None:
+            return "first"
+        if self._last_iterations > self.max_iterations:
+            return "iterations"
+        if stiffness.relative_change(self._built_with) > self.max_change:
+            return "stiffness"
+        return None
+
+    def refreshed(self, stiffness: IncrementalStiffness, reason: str) -> None:
+        self.refreshes += 1
+        self.reasons.append(reason)
+        self._built_with = stiffness.assembled.x.array.copy()
+
+    def solved(self, iterations: int) -> None:
+        self._last_iterations = iterations
 
 
 class FractureProblem:
@@ -118,7 +248,7 @@ class FractureProblem:
             self.q_dof_of_pixel[index] = self.owned_q_dofs
 
         self._build_boundary_conditions()
-        self._build_equilibrium(petsc["displacement"])
+        self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"))
         self._tensile_energy = fem.Expression(
             physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"]),
             self.quadrature_points,
@@ -139,13 +269,29 @@ class FractureProblem:
                 dofs = fem.locate_dofs_topological(sub, fdim, facets)
                 self.bcs.append(fem.dirichletbc(self.load if kind == "load" else zero, dofs, sub))
                 if kind == "load":
-                    loaded.append(dofs[dofs < n_owned])
-        self.loaded_dofs = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int32)
+                    loaded.append(dofs)
+        loaded = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int32)
+        self._loaded_dofs_with_ghosts = loaded
+        self.loaded_dofs = loaded[loaded < n_owned]
 
-    def _build_equilibrium(self, options: dict) -> None:
+    def _build_equilibrium(self, options: dict, reuse: dict | None = None) -> None:
+        """Forms, matrix and KSP of the displacement solve. ``reuse`` (a preset's
+        ``displacement_reuse``, None: rebuild everything every solve, the classic path): keep
+        the preconditioner across solves (PreconditionerReuse), assemble only the cells whose
+        degradation moved (IncrementalStiffness) and start from the previous solution scaled to
+        the new load."""
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, self.material) * self.dx)
-        self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * self.dx)
+        # the reaction on the loaded dofs comes only from the cells that hold them (owned or
+        # ghost dofs: the ghosts' contributions reach their owner in reaction_force)
+        index_map = self.V.dofmap.index_map
+        cell_blocks = self.V.dofmap.list.array.reshape(self.local_cells.size, -1)[: self.n_cells_owned]
+        loaded_blocks = np.zeros(index_map.size_local + index_map.num_ghosts, dtype=bool)
+        loaded_blocks[self._loaded_dofs_with_ghosts // self.V.dofmap.index_map_bs] = True
+        loaded_cells = np.flatnonzero(loaded_blocks[cell_blocks].any(axis=1)).astype(np.int32)
+        edge = dmesh.meshtags(self.domain, self.domain.topology.dim, loaded_cells, np.ones(len(loaded_cells), dtype=np.int32))
+        dx_loaded = ufl.Measure("dx", domain=self.domain, metadata=QUADRATURE, subdomain_data=edge)(1)
+        self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * dx_loaded)
         self.A_u = fem_petsc.create_matrix(self.equilibrium_form)
         self.A_u.setNearNullSpace(rigid_body_modes(self.V))
         self.b_u = fem_petsc.create_vector(self.internal_force_form)
@@ -155,6 +301,15 @@ class FractureProblem:
         configure_ksp(self.ksp_u, "displacement_", options)
         if self.ksp_u.getType() != PETSc.KSP.Type.PREONLY:
             self.ksp_u.setInitialGuessNonzero(True)
+        self.stiffness = self.reuse = None
+        self._displacement_options = dict(options)
+        self.scaled_initial_guess = False
+        if reuse is not None:
+            self.stiffness = IncrementalStiffness(self, reuse["assembly_tolerance"])
+            self.reuse = PreconditionerReuse(reuse)
+            self.scaled_initial_guess = reuse["initial_guess"] == "scaled"
+        self._solved_load: float | None = None   # the load of the solution held in displacement
+        self.displacement_iterations = 0
 
     def set_initial_history(self) -> None:
         """H0 of 'history' notches (Borden et al. 2012): B Gc/(2 lc) (1 - 4d/lc) for d <= lc/4."""
@@ -173,17 +328,56 @@ class FractureProblem:
     def solve_displacement(self, load_value: float) -> int:
         """Assemble and solve equilibrium with the current phase_field_gp; returns iterations."""
         self.load.value = load_value
-        self.A_u.zeroEntries()
-        fem_petsc.assemble_matrix(self.A_u, self.equilibrium_form, bcs=self.bcs)
-        self.A_u.assemble()
+        if self.reuse is None:
+            self.A_u.zeroEntries()
+            fem_petsc.assemble_matrix(self.A_u, self.equilibrium_form, bcs=self.bcs)
+            self.A_u.assemble()
+        elif self.stiffness.full_assemblies == 0:
+            self.stiffness.assemble_full(self.A_u)
+        else:
+            self.stiffness.update(self.A_u)
         with self.b_u.localForm() as local:
             local.set(0.0)
         fem_petsc.apply_lifting(self.b_u, [self.equilibrium_form], bcs=[self.bcs])
         self.b_u.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fem_petsc.set_bc(self.b_u, self.bcs)
+        if self.scaled_initial_guess and self._solved_load and load_value != self._solved_load:
+            # exact for an unchanged stiffness: the solution is linear in the prescribed displacement
+            self.displacement.vector.scale(load_value / self._solved_load)
+        if self.reuse is None:
+            iterations = self._solve_u()
+        else:
+            iterations = self._solve_u_reusing()
+        self._solved_load = load_value
+        self.displacement_iterations = iterations
+        return iterations
+
+    def _solve_u(self) -> int:
         self.ksp_u.solve(self.b_u, self.displacement.vector)
         self.displacement.x.scatter_forward()
         return check_converged(self.ksp_u, "displacement")
+
+    def _solve_u_reusing(self) -> int:
+        """Solve with the kept preconditioner unless the policy asks for a fresh one; a solve
+        that fails with a kept one is redone once with a fresh one (from the same start)."""
+        pc, policy = self.ksp_u.getPC(), self.reuse
+        reason = policy.needs_refresh(self.stiffness)
+        start = None if reason else self.displacement.vector.copy()
+        pc.setReusePreconditioner(reason is None)
+        if reason:
+            policy.refreshed(self.stiffness, reason)
+        with petsc_options("displacement_", self._displacement_options if reason else {}):
+            self.ksp_u.solve(self.b_u, self.displacement.vector)
+        if self.ksp_u.getConvergedReason() < 0 and start is not None:
+            start.copy(self.displacement.vector)
+            pc.setReusePreconditioner(False)
+            policy.refreshed(self.stiffness, "diverged")
+            with petsc_options("displacement_", self._displacement_options):
+                self.ksp_u.solve(self.b_u, self.displacement.vector)
+        self.displacement.x.scatter_forward()
+        iterations = check_converged(self.ksp_u, "displacement")
+        policy.solved(iterations)
+        return iterations
 
     def update_history(self) -> None:
         """H = max(H_previous_increment, psi_0^+(u)) at every Gauss point (local + ghost cells)."""

@@ -87,3 +87,33 @@ rule phase_field_benchmark:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model}"
         " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone}"
         " --verification {params.verification} --out {output} > {log} 2>&1"
+
+
+rule increment_benchmark:
+    input:
+        ifenn_specs=lambda w: [f"results/ifenn/{r}/spec.json" for r in config["increment_benchmark"]["runs"]],
+        fem=lambda w: [f"results/fem/{config['ifenn_runs'][r]['fem_run']}/{f}" for r in config["increment_benchmark"]["runs"]
+                       for f in ("fields.h5", "history.csv")],
+        meshes=lambda w: sorted({f"results/mesh/{config['fem_runs'][config['ifenn_runs'][r]['fem_run']]['scene']}.xdmf"
+                                 for r in config["increment_benchmark"]["runs"]}),
+        model="results/picnn/model.pt",
+    output:
+        "results/benchmarks/increment_speed.csv",
+    params:
+        python=PYTHON,
+        script=os.path.join(workflow.basedir, "benchmarks", "increment_speed.py"),
+        increments=config.get("increment_benchmark", {}).get("increments", 40),
+        solvers=lambda w: json.dumps(json.dumps({label: [name, config["solver"]["linear_solver_presets"][name]]
+                                                 for label, name in config["increment_benchmark"]["solvers"].items()})),
+        new_solver=config.get("increment_benchmark", {}).get("new_solver", ""),
+        zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
+    # all cores: nothing else runs while it measures (the benchmark itself uses one)
+    threads: all_cores
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/benchmarks/increment_speed.log",
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
+        " --solvers {params.solvers} --new-solver {params.new_solver} --process-zone {params.zone}"
+        " --increments {params.increments} --out {output} > {log} 2>&1"

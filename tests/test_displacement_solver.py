@@ -1,0 +1,123 @@
+"""The displacement solve that keeps its preconditioner (preset gamg-reuse): it agrees with a
+fresh solve to the solver tolerance across a small crack run, its incremental assembly gives the
+matrix of a full one, the reaction from the loaded cells equals the one from all cells, and the
+preconditioner is rebuilt when the policy says so and only then."""
+
+import copy
+
+import numpy as np
+import pytest
+from conftest import build_problem
+from dolfinx.fem import petsc as fem_petsc
+
+from ifenn.config import ConfigError, validate_config
+from ifenn.phase_field_steps import FEMPhaseField
+
+
+@pytest.fixture
+def presets(quick_config):
+    return quick_config["solver"]["linear_solver_presets"]
+
+
+def _pair(quick_spec, presets, tmp_path, reuse_settings=None):
+    spec = quick_spec("snt1-I")
+    kept = copy.deepcopy(presets["gamg-reuse"])
+    kept["displacement_reuse"].update(reuse_settings or {})
+    fresh = copy.deepcopy(kept)
+    del fresh["displacement_reuse"]   # same KSP options, preconditioner rebuilt every solve
+    a, _ = build_problem(spec["scene"], spec["material"], kept, tmp_path, "kept")
+    b, _ = build_problem(spec["scene"], spec["material"], fresh, tmp_path, "fresh")
+    return spec, a, b
+
+
+def test_kept_preconditioner_agrees_with_a_fresh_solve_across_a_crack_run(quick_spec, presets, tmp_path):
+    """Both problems take the same phase field each increment (the kept one's FEM step drives);
+    the displacements agree to the solver tolerance while the crack runs through."""
+    spec, kept, fresh = _pair(quick_spec, presets, tmp_path)
+    step = FEMPhaseField(kept, presets["gamg-reuse"]["phase_field"])
+    rtol = presets["gamg-reuse"]["displacement"]["ksp_rtol"]
+    worst = 0.0
+    for u in spec["load"]:
+        fresh.phase_field_gp.x.array[:] = kept.phase_field_gp.x.array
+        kept.solve_displacement(u)
+        fresh.solve_displacement(u)
+        scale = np.abs(fresh.displacement.x.array).max()
+        worst = max(worst, np.abs(kept.displacement.x.array - fresh.displacement.x.array).max() / scale)
+        np.testing.assert_allclose(kept.reaction_force(), fresh.reaction_force(), rtol=1e3 * rtol, atol=1e-6)
+        kept.update_history()
+        step.step()
+        kept.accept_increment()
+    assert step.phase_field_max() > 0.99, "the crack did not run: the scene tests nothing"
+    assert worst < 1e3 * rtol
+    # the quick scene's steps are coarse (the crack crosses it in ~10 increments): the policy
+    # rebuilds often while the stiffness drops, and keeps the hierarchy in between
+    assert kept.reuse.reasons[0] == "first"
+    assert set(kept.reuse.reasons[1:]) <= {"stiffness", "iterations"}
+    assert kept.reuse.refreshes < len(spec["load"])
+
+
+def test_incremental_assembly_gives_the_full_matrix(quick_spec, presets, tmp_path):
+    spec, kept, fresh = _pair(quick_spec, presets, tmp_path)
+    rng = np.random.default_rng(1)
+    for k, fraction in enumerate((0.0, 0.3, 0.05, 0.0)):
+        phi = kept.phase_field_gp.x.array
+        changed = rng.random(phi.size) < fraction
+        phi[changed] = np.minimum(1.0, phi[changed] + rng.random(changed.sum()))
+        fresh.phase_field_gp.x.array[:] = phi
+        kept.solve_displacement(1e-3 * (k + 1))
+        fresh.solve_displacement(1e-3 * (k + 1))
+        difference = kept.A_u.copy()
+        difference.axpy(-1.0, fresh.A_u)
+        assert difference.norm() <= 1e-12 * fresh.A_u.norm()
+        if k > 0 and fraction == 0.0:
+            assert kept.stiffness.changed_cells == 0
+
+
+def test_reaction_from_the_loaded_cells_equals_the_one_from_all_cells(quick_spec, presets, tmp_path):
+    import ufl
+    from dolfinx import fem
+
+    from ifenn import physics
+
+    spec, kept, _ = _pair(quick_spec, presets, tmp_path)
+    kept.phase_field_gp.x.array[:] = np.random.default_rng(2).random(kept.phase_field_gp.x.array.size) * 0.5
+    kept.solve_displacement(2e-3)
+    v = ufl.TestFunction(kept.V)
+    everywhere = fem.form(physics.equilibrium_form(kept.displacement, v, kept.phase_field_gp, kept.material) * kept.dx)
+    vector = fem_petsc.assemble_vector(everywhere)
+    full = float(vector.array_r[kept.loaded_dofs].sum())
+    assert kept.reaction_force() == pytest.approx(full, rel=1e-12)
+
+
+def test_refreshes_after_a_big_stiffness_change_and_not_without_one(quick_spec, presets, tmp_path):
+    spec, kept, _ = _pair(quick_spec, presets, tmp_path, {"refresh_stiffness_change": 0.05, "refresh_iterations": 1000})
+    kept.solve_displacement(1e-3)
+    assert kept.reuse.reasons == ["first"]
+    for u in (1.5e-3, 2e-3, 2e-3):   # no change of phi: the hierarchy is kept
+        kept.solve_displacement(u)
+    assert kept.reuse.refreshes == 1
+    q = kept.q_dofs[: kept.n_cells_owned]
+    kept.phase_field_gp.x.array[q[: len(q) // 5]] = 0.9   # a fifth of the cells nearly broken: g moved by far more than 5 %
+    kept.solve_displacement(2e-3)
+    assert kept.reuse.reasons == ["first", "stiffness"]
+    kept.solve_displacement(2.1e-3)
+    assert kept.reuse.refreshes == 2
+
+
+def test_refreshes_when_the_iterations_grow(quick_spec, presets, tmp_path):
+    spec, kept, _ = _pair(quick_spec, presets, tmp_path, {"refresh_stiffness_change": 10.0, "refresh_iterations": 1})
+    kept.solve_displacement(1e-3)
+    kept.solve_displacement(2e-3)   # the first solve took more than one iteration
+    assert kept.reuse.reasons == ["first", "iterations"]
+
+
+def test_a_kept_preconditioner_needs_a_krylov_solve(quick_config):
+    config = copy.deepcopy(quick_config)
+    preset = config["solver"]["linear_solver_presets"]["gamg-reuse"]
+    preset["displacement"] = {"ksp_type": "preonly", "pc_type": "cholesky"}
+    with pytest.raises(ConfigError, match="displacement_reuse"):
+        validate_config(config)
+    config = copy.deepcopy(quick_config)
+    config["solver"]["linear_solver_presets"]["gamg-reuse"]["displacement_reuse"]["refresh_iterations"] = 0
+    with pytest.raises(ConfigError, match="refresh_iterations"):
+        validate_config(config)
