@@ -17,7 +17,8 @@
 #                memory (from `slurmd -C`)
 # CommunicationParameters=NoInAddrAny,NoCtldInAddrAny make the SLURM daemons bind to the address
 # their name resolves to (localhost: 127.0.0.1) instead of every interface; srun's own ports are
-# bound the same way. No cgroups (proctrack/linuxproc, task/none): containers often lack them.
+# bound the same way. No cgroups (proctrack/linuxproc, task/none): the cluster does not depend on
+# how a container exposes them.
 #
 # Files: /etc/slurm/{slurm,slurmdbd}.conf (only if absent or written by this script
 # before: a site's own slurm.conf is never overwritten), state in /var/lib/slurm/local,
