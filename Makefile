@@ -17,7 +17,12 @@ export OMPI_ALLOW_RUN_AS_ROOT := 1
 export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: all test install system lint dry-run benchmark clean-results
+.PHONY: all test install system lint dry-run benchmark clean-results slurm-system slurm-up slurm-down slurm-status
+
+# A one-node SLURM cluster on localhost (workflow/cluster/local-slurm.sh), for running the
+# workflow through profiles/slurm here; its packages are installed only by these targets.
+SLURM_PACKAGES := slurmctld slurmd slurm-client slurmdbd munge mariadb-server
+SLURM_SCRIPT := workflow/cluster/local-slurm.sh
 
 all: $(STAMP)
 	$(VENV)/bin/snakemake $(CORES) $(ARGS)
@@ -50,3 +55,18 @@ dry-run: $(STAMP)
 
 benchmark: $(STAMP)
 	$(VENV)/bin/python benchmarks/fem_speed.py
+
+slurm-system:
+	@dpkg -s $(SLURM_PACKAGES) >/dev/null 2>&1 || { \
+	  echo "installing Debian packages: $(SLURM_PACKAGES)"; \
+	  $(SUDO) apt-get update -q && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -q --no-install-recommends $(SLURM_PACKAGES); }
+
+slurm-up: slurm-system
+	$(SUDO) $(SLURM_SCRIPT) up
+
+slurm-down:
+	$(SUDO) $(SLURM_SCRIPT) down
+
+slurm-status:
+	$(SLURM_SCRIPT) status

@@ -2,6 +2,8 @@
 import json
 import sys
 
+from snakemake.settings.types import DeploymentMethod
+
 from ifenn import stability as _stability
 from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
 from ifenn.metrics import process_zone_pairs
@@ -13,7 +15,9 @@ except ConfigError as error:
 config.clear()
 config.update(_validated)
 
-PYTHON = sys.executable
+# Shell rules start the package's CLI with this interpreter: Snakemake's own (the venv of `make`),
+# or, with --software-deployment-method conda, the `python` of the rule's environment.
+PYTHON = "python" if DeploymentMethod.CONDA in workflow.deployment_settings.deployment_method else sys.executable
 SCRIPTS = os.path.join(workflow.basedir, "workflow", "scripts")
 MPI_LAUNCHER = "mpirun -n {ranks} --oversubscribe"
 

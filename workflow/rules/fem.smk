@@ -8,8 +8,6 @@ rule fem_spec:
         "results/fem/{run}/spec.json",
     params:
         spec=lambda w: fem_spec_json(w.run),
-    conda:
-        "../envs/ifenn.yaml"
     log:
         "logs/fem/{run}_spec.log",
     run:
@@ -34,7 +32,9 @@ rule fem:
         out=lambda w, output: os.path.dirname(output.history),
     threads: 1
     resources:
-        mpi="mpirun",
+        # on SLURM: `tasks` -> --ntasks; a non-empty `mpi` marks an MPI job, whose shell command
+        # runs as the batch step (the launcher's mpirun starts the ranks in the allocation)
+        mpi=lambda w: "mpirun" if fem_ranks(w) > 1 else "",
         tasks=fem_ranks,
         mem_mb=4000,
         runtime=240,

@@ -7,8 +7,6 @@ rule ifenn_spec:
         "results/ifenn/{run}/spec.json",
     params:
         spec=lambda w: json.dumps(ifenn_run_spec(config, w.run), sort_keys=True),
-    conda:
-        "../envs/ifenn.yaml"
     log:
         "logs/ifenn/{run}_spec.log",
     run:

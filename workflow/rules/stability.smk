@@ -9,8 +9,6 @@ rule stability_cell_spec:
         spec=lambda w: json.dumps(STABILITY_CELLS[w.cell]["spec"], sort_keys=True),
     wildcard_constraints:
         cell="(fem|ifenn)_[A-Za-z0-9_.+-]+",
-    conda:
-        "../envs/ifenn.yaml"
     log:
         "logs/stability/{cell}_spec.log",
     run:
