@@ -215,7 +215,7 @@ def comparison_figure(fem_history, ifenn_history, fem_fields, ifenn_fields, path
     aspect = (extent[3] - extent[2]) / (extent[1] - extent[0])
     n_maps = len(panels)
     fig = plt.figure(figsize=(3.2 * ncol + 1, 3.6 + n_maps * 3.2 * aspect + 0.6))
-    grid = fig.add_gridspec(1 + n_maps, ncol, height_ratios=[1.3] + [aspect * 1.1] * n_maps)
+    grid = fig.add_gridspec(1 + n_maps, ncol, height_ratios=[1.3] + [aspect * 1.1] * n_maps, hspace=0.5)
     ax = fig.add_subplot(grid[0, :])
     ax.plot(fem_history.u, fem_history.reaction_force, label="FEM", lw=1.6)
     ax.plot(ifenn_history.u, ifenn_history.reaction_force, "--", label="IFENN (published)", lw=1.6)
