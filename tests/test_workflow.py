@@ -72,7 +72,10 @@ def test_quick_profile_issue5_results(quick_workflow):
     assert set(stability.panel) == {"load step", "lc/h", "IFENN option"}
     assert set(stability.label) <= {"ok", "peak off", "crack path wrong", "no load drop", "diverged"}
     speed = pd.read_csv(results / "benchmarks" / "phase_field_speed.csv")
-    assert set(speed.method) == {"fem", "ifenn_full_convolution", "ifenn_full", "ifenn_process_zone"} and (speed.t_phase_field_s > 0).all()
+    assert set(speed.method) == {"fem", "ifenn_full_convolution", "ifenn_full", "ifenn_process_zone", "ifenn_verified",
+                                 "ifenn_verified_nonet"} and (speed.t_phase_field_s > 0).all()
+    verified = speed[speed.method.str.startswith("ifenn_verified")]
+    assert (verified.verify_residual_after_max <= 1e-3).all()
     # the orbit evaluation is the same network: the same forces as the convolutions
     final = speed.pivot(index="run", columns="method", values="final_force")
     assert ((final.ifenn_full - final.ifenn_full_convolution).abs() < 1e-3 * final.fem).all()
@@ -138,3 +141,20 @@ def test_bad_config_fails_before_any_job(tmp_path):
     assert result.returncode != 0
     assert "material.Gc" in result.stderr and "-2.7 is less than or equal to the minimum of 0" in result.stderr
     assert not (tmp_path / "results").exists()
+
+
+def test_quick_profile_verified_runs_track_fem(quick_workflow):
+    """Verified IFENN on the seven quick runs: every hybrid increment certified (max |r| within
+    the tolerance), and after the switch-over the force tracks FEM within 1 % of its peak (RMS),
+    where the published step is off by several percent on most runs."""
+    from ifenn.metrics import post_switch_force_error
+
+    results = quick_workflow / "results"
+    for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
+        fem = pd.read_csv(results / "fem" / run / "history.csv")
+        published, verified = (pd.read_csv(results / "ifenn" / name / "history.csv") for name in (run, f"{run}-verified"))
+        hybrid = verified[verified.hybrid_active == 1]
+        assert len(hybrid) > 0 and (hybrid.verify_residual_after <= 1e-3).all(), run
+        error = post_switch_force_error(fem, verified)["post_switch_rms_error"]
+        assert error < 0.01, (run, error)
+        assert error < post_switch_force_error(fem, published)["post_switch_rms_error"], run
