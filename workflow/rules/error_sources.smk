@@ -22,6 +22,6 @@ rule error_sources:
     log:
         "logs/tables/error_sources.log",
     benchmark:
-        "benchmarks/error_sources.tsv"
+        "benchmarks/error_sources/error_sources.tsv"
     script:
         "../scripts/error_sources.py"
