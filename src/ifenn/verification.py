@@ -299,7 +299,6 @@ class VerifiedInference:
         self.margin = int(np.ceil(float(margin_lc) * equation.lc / equation.h_px))
         self.max_rounds, self.solve_fraction = int(max_rounds), float(solve_fraction)
         self.warm_start = warm_start
-        self.keep_diagnostics = False   # keep the mask of failing pixels of the last call (``failing``)
         self.failing_fraction = 0.0
         self.kernel = getattr(inference, "kernel", "")
         self.phi = None           # last verified phi image
@@ -356,7 +355,6 @@ class VerifiedInference:
         failing = np.abs(residual) > self.tolerance
         self.residual_before = float(np.max(np.abs(residual), initial=0.0))
         self.failing_fraction = float(np.count_nonzero(failing)) / failing.size
-        self.failing = failing.copy() if self.keep_diagnostics else None
         self.t_check = time.perf_counter() - started
         started = time.perf_counter()
         corrected = np.zeros(capped.shape, bool)
