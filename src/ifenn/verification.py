@@ -87,22 +87,11 @@ def _stencil_sum(padded: np.ndarray) -> np.ndarray:
     return LAPLACIAN_K9_STAR[0, 1] * edge + LAPLACIAN_K9_STAR[0, 0] * corner
 
 
-def _pad_image(image: np.ndarray, padding: str) -> np.ndarray:
-    return np.pad(image, 1, mode="edge" if padding == "replicate" else "constant")
-
-
-def pixel_residual(phi: np.ndarray, history: np.ndarray, Gc: float, lc: float, h_px: float,
-                   padding: str = "replicate") -> np.ndarray:
-    """R = (Gc/lc + 2H) phi - Gc lc Lap(phi) - 2H on the whole image, N/mm^2 (float64).
-    The same residual as :func:`ifenn.picnn.residual`, in numpy."""
-    phi = np.asarray(phi, dtype=np.float64)
-    diffusion = Gc * lc / h_px**2
-    return (Gc / lc + 2.0 * history) * phi - diffusion * (_stencil_sum(_pad_image(phi, padding)) - 3.0 * phi) - 2.0 * history
-
-
 def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate") -> np.ndarray:
-    """r = R / (Gc/lc + 2H): an upper bound, in the max norm, of |phi - exact| (module doc)."""
-    return pixel_residual(phi, history, Gc, lc, h_px, padding) / (Gc / lc + 2.0 * np.asarray(history, dtype=np.float64))
+    """r = R / (Gc/lc + 2H) on the whole image: an upper bound, in the max norm, of
+    |phi - exact| (module doc). R is the residual of :func:`ifenn.picnn.residual`."""
+    phi, history = np.asarray(phi, dtype=np.float64), np.asarray(history, dtype=np.float64)
+    return PixelEquation(Gc, lc, h_px, padding).residual_on(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])))
 
 
 class PixelEquation:
