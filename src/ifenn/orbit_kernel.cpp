@@ -13,8 +13,10 @@
 // reads there is not stored). Runs are (row, first column, end column) in image coordinates
 // (0 <= row < ny, 0 <= first < end <= nx); outputs are written inside the padding only.
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <vector>
 
 namespace {
@@ -240,6 +242,325 @@ void ifenn_pixel_operator(const double* ext, const double* history, double* out,
     }
 }
 
-int ifenn_kernel_version() { return 3; }
+}  // extern "C"
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// Conjugate gradients preconditioned by one multigrid V-cycle, for the correction of the pixel
+// equation on an n x m box (ifenn/verification.py, PixelEquation.solve_box):
+//
+//     A delta = rhs,   (A x)_i = (a_i + 3 D) x_i - D (0.5 sum_edges x_j + 0.25 sum_corners x_j),
+//
+// a = a0 + 2 H, with x = 0 beyond a side of the box that lies inside the image (Dirichlet data:
+// the values around the box stay) and x replicated beyond a side on the image edge (the
+// "replicate" padding, zero flux); ``replicate`` holds the four sides' flags (bottom = row 0, top,
+// left = column 0, right). Stops when max_i |r_i| / a_i <= target (the certificate of the module
+// doc) and returns the iterations (-1: not reached in maxiter); *worst gets the max reached.
+//
+// The V-cycle (cell-centred, 2 x 2 agglomeration): undamped Jacobi smoothing (2 sweeps before
+// and after; for this 9-point stencil the high-frequency eigenvalues of D^-1 A lie in [2/3, 4/3],
+// so plain Jacobi damps them by 1/3 or more), bilinear prolongation, restriction = its transpose
+// / 4 (the preconditioner is symmetric positive definite, as CG needs), coarse operators
+// re-discretised (D / 4 per level, a averaged over the children), Jacobi sweeps on the coarsest.
+struct MGLevel {
+    int n, m;
+    double D;
+    bool rep[4];                       // bottom, top, left, right: replicate (true) or zero ghosts
+    std::vector<double> a;             // a, n x m
+    std::vector<double> diag, inv;     // a + 3 D and its inverse, n x m
+    std::vector<double> x, y;          // (n + 2) x (m + 2), padded (y: the Jacobi sweeps' second buffer)
+    std::vector<double> b, r;          // n x m
+    // bilinear transfer to the next coarser level, per direction: fine index -> two coarse
+    // indices and weights (a ghost folded onto the edge or dropped; weight 0 when dropped)
+    std::vector<int> row_c, col_c;
+    std::vector<double> row_w, col_w;
+    std::vector<double> tmp;           // coarse rows x fine columns
+};
+
+inline void mg_ghosts(const MGLevel& L, double* x) {
+    const int n = L.n, m = L.m;
+    const int64_t w = m + 2;
+    for (int j = 1; j <= m; ++j) {
+        x[j] = L.rep[0] ? x[w + j] : 0.0;
+        x[(n + 1) * w + j] = L.rep[1] ? x[n * w + j] : 0.0;
+    }
+    for (int i = 0; i <= n + 1; ++i) {
+        x[i * w] = L.rep[2] ? x[i * w + 1] : 0.0;
+        x[i * w + m + 1] = L.rep[3] ? x[i * w + m] : 0.0;
+    }
+}
+
+// one row of A x (x padded, ghosts filled)
+inline double mg_row(const double* up, const double* mid, const double* down, int j, double d, double D) {
+    const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+    const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+    return d * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
+}
+
+// y = b - A x, or y = A x when b is null
+void mg_apply(const MGLevel& L, const double* x, const double* b, double* y) {
+    const int n = L.n, m = L.m;
+    const int64_t w = m + 2;
+    for (int i = 0; i < n; ++i) {
+        const double* up = x + i * w;
+        const double* d = L.diag.data() + static_cast<int64_t>(i) * m;
+        double* o = y + static_cast<int64_t>(i) * m;
+        if (b) {
+            const double* bb = b + static_cast<int64_t>(i) * m;
+            for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
+        } else {
+            for (int j = 0; j < m; ++j) o[j] = mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
+        }
+    }
+}
+
+// ``sweeps`` Jacobi sweeps x += D^-1 (b - A x), each one pass into the second buffer; from x = 0
+// the first is x = D^-1 b. Leaves x's ghosts filled.
+void mg_jacobi(MGLevel& L, int sweeps, bool from_zero) {
+    const int n = L.n, m = L.m;
+    const int64_t w = m + 2;
+    int done = 0;
+    if (from_zero) {
+        for (int i = 0; i < n; ++i) {
+            double* xi = L.x.data() + (i + 1) * w + 1;
+            const double* bi = L.b.data() + static_cast<int64_t>(i) * m;
+            const double* vi = L.inv.data() + static_cast<int64_t>(i) * m;
+            for (int j = 0; j < m; ++j) xi[j] = bi[j] * vi[j];
+        }
+        done = 1;
+    }
+    mg_ghosts(L, L.x.data());
+    for (; done < sweeps; ++done) {
+        const double* x = L.x.data();
+        for (int i = 0; i < n; ++i) {
+            const double* up = x + i * w;
+            const double* d = L.diag.data() + static_cast<int64_t>(i) * m;
+            const double* vi = L.inv.data() + static_cast<int64_t>(i) * m;
+            const double* bi = L.b.data() + static_cast<int64_t>(i) * m;
+            double* yi = L.y.data() + (i + 1) * w + 1;
+            for (int j = 0; j < m; ++j) yi[j] = up[w + j + 1] + vi[j] * (bi[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D));
+        }
+        std::swap(L.x, L.y);
+        mg_ghosts(L, L.x.data());
+    }
+}
+
+// cell-centred bilinear interpolation in one direction: fine i takes 3/4 of its parent i / 2
+// and 1/4 of the parent's neighbour towards i; a neighbour beyond the edge is the parent
+// itself (replicate) or zero (dropped)
+void mg_transfer(int nf, int nc, bool rep_low, bool rep_high, std::vector<int>& idx, std::vector<double>& wgt) {
+    idx.assign(2 * nf, 0);
+    wgt.assign(2 * nf, 0.0);
+    for (int i = 0; i < nf; ++i) {
+        const int p = i / 2, q = (i % 2 == 0) ? p - 1 : p + 1;
+        idx[2 * i] = p, wgt[2 * i] = 0.75;
+        if (q >= 0 && q < nc) {
+            idx[2 * i + 1] = q, wgt[2 * i + 1] = 0.25;
+        } else if ((q < 0 && rep_low) || (q >= nc && rep_high)) {
+            wgt[2 * i] = 1.0;
+            idx[2 * i + 1] = p;
+        } else {
+            idx[2 * i + 1] = p;  // weight 0
+        }
+    }
+}
+
+void mg_restrict(MGLevel& F, MGLevel& C) {  // C.b = P^T F.r / 4, separably
+    const int mf = F.m, mc = C.m;
+    std::fill(F.tmp.begin(), F.tmp.end(), 0.0);
+    for (int i = 0; i < F.n; ++i) {
+        const double* ri = F.r.data() + static_cast<int64_t>(i) * mf;
+        for (int k = 0; k < 2; ++k) {
+            const double wk = 0.25 * F.row_w[2 * i + k];
+            if (wk == 0.0) continue;
+            double* t = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + k]) * mf;
+            for (int j = 0; j < mf; ++j) t[j] += wk * ri[j];
+        }
+    }
+    std::fill(C.b.begin(), C.b.end(), 0.0);
+    for (int I = 0; I < C.n; ++I) {
+        const double* t = F.tmp.data() + static_cast<int64_t>(I) * mf;
+        double* out = C.b.data() + static_cast<int64_t>(I) * mc;
+        for (int j = 0; j < mf; ++j) {
+            out[F.col_c[2 * j]] += F.col_w[2 * j] * t[j];
+            out[F.col_c[2 * j + 1]] += F.col_w[2 * j + 1] * t[j];
+        }
+    }
+}
+
+void mg_prolong_add(MGLevel& F, const MGLevel& C) {  // F.x += P C.x, separably
+    const int mc = C.m;
+    const int64_t wc = mc + 2, wf = F.m + 2;
+    const double* xc = C.x.data();
+    for (int I = 0; I < C.n; ++I) {  // tmp (coarse rows x fine columns) = C.x P_x^T
+        const double* row = xc + (I + 1) * wc + 1;
+        double* t = F.tmp.data() + static_cast<int64_t>(I) * F.m;
+        for (int j = 0; j < F.m; ++j) t[j] = F.col_w[2 * j] * row[F.col_c[2 * j]] + F.col_w[2 * j + 1] * row[F.col_c[2 * j + 1]];
+    }
+    for (int i = 0; i < F.n; ++i) {
+        const double* t0 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i]) * F.m;
+        const double* t1 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + 1]) * F.m;
+        const double w0 = F.row_w[2 * i], w1 = F.row_w[2 * i + 1];
+        double* xi = F.x.data() + (i + 1) * wf + 1;
+        for (int j = 0; j < F.m; ++j) xi[j] += w0 * t0[j] + w1 * t1[j];
+    }
+}
+
+#ifndef MG_SMOOTH_VALUE
+#define MG_SMOOTH_VALUE 2
+#endif
+constexpr int MG_SMOOTH = MG_SMOOTH_VALUE;
+constexpr int MG_COARSEST_SWEEPS = 30;
+
+void mg_vcycle(std::vector<MGLevel>& levels, size_t k) {  // levels[k].x from levels[k].b
+    MGLevel& L = levels[k];
+    if (k + 1 == levels.size()) {
+        mg_jacobi(L, MG_COARSEST_SWEEPS, true);
+        return;
+    }
+    mg_jacobi(L, MG_SMOOTH, true);
+    mg_apply(L, L.x.data(), L.b.data(), L.r.data());
+    mg_restrict(L, levels[k + 1]);
+    mg_vcycle(levels, k + 1);
+    mg_prolong_add(L, levels[k + 1]);
+    mg_jacobi(L, MG_SMOOTH, false);  // as many sweeps after as before: a symmetric V-cycle
+}
+
+// The levels and CG vectors of one box shape, kept between calls: a correction runs every
+// increment on boxes of few shapes, and fresh buffers would cost their page faults each time
+// (about as much as the solve at 600 x 600).
+struct MGWork {
+    int n, m, rep[4];
+    std::vector<MGLevel> levels;
+    std::vector<double> r, z, q, p, inv_a;
+};
+
+MGWork& mg_work(int n, int m, const int* replicate) {
+    static std::vector<std::unique_ptr<MGWork>> cache;
+    for (auto& work : cache)
+        if (work->n == n && work->m == m && std::equal(replicate, replicate + 4, work->rep)) return *work;
+    if (cache.size() >= 8) cache.erase(cache.begin());  // the oldest shape goes
+    auto work = std::make_unique<MGWork>();
+    work->n = n, work->m = m;
+    std::copy(replicate, replicate + 4, work->rep);
+    std::vector<MGLevel>& levels = work->levels;
+    levels.resize(1);
+    levels[0].n = n, levels[0].m = m;
+    for (int s = 0; s < 4; ++s) levels[0].rep[s] = replicate[s] != 0;
+    while (levels.back().n > 4 && levels.back().m > 4 && levels.size() < 16) {
+        MGLevel C;
+        C.n = (levels.back().n + 1) / 2, C.m = (levels.back().m + 1) / 2;
+        for (int s = 0; s < 4; ++s) C.rep[s] = levels.back().rep[s];
+        levels.push_back(std::move(C));
+    }
+    for (size_t k = 0; k < levels.size(); ++k) {
+        MGLevel& L = levels[k];
+        const size_t size = static_cast<size_t>(L.n) * L.m;
+        L.a.assign(size, 0.0), L.diag.assign(size, 0.0), L.inv.assign(size, 0.0);
+        L.x.assign(static_cast<size_t>(L.n + 2) * (L.m + 2), 0.0), L.y = L.x;
+        L.b.assign(size, 0.0), L.r.assign(size, 0.0);
+        if (k + 1 < levels.size()) {
+            const MGLevel& C = levels[k + 1];
+            mg_transfer(L.n, C.n, L.rep[0], L.rep[1], L.row_c, L.row_w);
+            mg_transfer(L.m, C.m, L.rep[2], L.rep[3], L.col_c, L.col_w);
+            L.tmp.assign(static_cast<size_t>(C.n) * L.m, 0.0);
+        }
+    }
+    const size_t size = static_cast<size_t>(n) * m;
+    work->r.assign(size, 0.0), work->z.assign(size, 0.0), work->q.assign(size, 0.0), work->inv_a.assign(size, 0.0);
+    work->p.assign(static_cast<size_t>(n + 2) * (m + 2), 0.0);
+    cache.push_back(std::move(work));
+    return *cache.back();
+}
+
+// the coefficients of every level for this a: coarse a = the mean of its (up to 4) children
+void mg_coefficients(MGWork& work, const double* a, double D) {
+    std::vector<MGLevel>& levels = work.levels;
+    std::copy(a, a + static_cast<size_t>(work.n) * work.m, levels[0].a.begin());
+    levels[0].D = D;
+    for (size_t k = 1; k < levels.size(); ++k) {
+        const MGLevel& F = levels[k - 1];
+        MGLevel& C = levels[k];
+        C.D = F.D / 4.0;
+        for (int I = 0; I < C.n; ++I) {
+            const int i0 = 2 * I, i1 = std::min(2 * I + 1, F.n - 1);
+            const double* f0 = F.a.data() + static_cast<size_t>(i0) * F.m;
+            const double* f1 = F.a.data() + static_cast<size_t>(i1) * F.m;
+            double* c = C.a.data() + static_cast<size_t>(I) * C.m;
+            for (int J = 0; J < C.m; ++J) {
+                const int j0 = 2 * J, j1 = std::min(2 * J + 1, F.m - 1);
+                c[J] = 0.25 * (f0[j0] + f0[j1] + f1[j0] + f1[j1]);  // an odd edge counts its last row / column twice
+            }
+        }
+    }
+    for (MGLevel& L : levels)
+        for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + 3.0 * L.D, L.inv[c] = 1.0 / L.diag[c];
+    for (size_t c = 0; c < work.inv_a.size(); ++c) work.inv_a[c] = 1.0 / a[c];
+}
+
+}  // namespace
+
+extern "C" {
+
+int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n, int m, double D, const int* replicate,
+                       double target, int maxiter, double* worst) {
+    MGWork& work = mg_work(n, m, replicate);
+    mg_coefficients(work, a, D);
+    std::vector<MGLevel>& levels = work.levels;
+    MGLevel& top = levels[0];
+    const int64_t size = static_cast<int64_t>(n) * m, w = m + 2;
+    std::vector<double>&r = work.r, &z = work.z, &q = work.q, &p = work.p;
+    const double* inv_a = work.inv_a.data();
+    std::copy(rhs, rhs + size, r.begin());
+    std::fill(delta, delta + size, 0.0);
+    auto max_scaled = [&]() {
+        double most = 0.0;
+        for (int64_t c = 0; c < size; ++c) most = std::max(most, std::abs(r[c]) * inv_a[c]);
+        return most;
+    };
+    auto precondition = [&]() {
+        std::copy(r.begin(), r.end(), top.b.begin());
+        mg_vcycle(levels, 0);
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < m; ++j) z[static_cast<int64_t>(i) * m + j] = top.x[(i + 1) * w + j + 1];
+    };
+    *worst = max_scaled();
+    if (*worst <= target) return 0;
+    precondition();
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < m; ++j) p[(i + 1) * w + j + 1] = z[static_cast<int64_t>(i) * m + j];
+    double rz = 0.0;
+    for (int64_t c = 0; c < size; ++c) rz += r[c] * z[c];
+    for (int iteration = 1; iteration <= maxiter; ++iteration) {
+        mg_ghosts(top, p.data());
+        mg_apply(top, p.data(), nullptr, q.data());
+        double pq = 0.0;
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < m; ++j) pq += p[(i + 1) * w + j + 1] * q[static_cast<int64_t>(i) * m + j];
+        const double alpha = rz / pq;
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < m; ++j) {
+                const int64_t c = static_cast<int64_t>(i) * m + j;
+                delta[c] += alpha * p[(i + 1) * w + j + 1];
+                r[c] -= alpha * q[c];
+            }
+        *worst = max_scaled();
+        if (*worst <= target) return iteration;
+        precondition();
+        double rz_new = 0.0;
+        for (int64_t c = 0; c < size; ++c) rz_new += r[c] * z[c];
+        const double beta = rz_new / rz;
+        rz = rz_new;
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < m; ++j) {
+                double& pc = p[(i + 1) * w + j + 1];
+                pc = z[static_cast<int64_t>(i) * m + j] + beta * pc;
+            }
+    }
+    return -1;
+}
+
+int ifenn_kernel_version() { return 4; }
 
 }

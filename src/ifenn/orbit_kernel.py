@@ -26,7 +26,7 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("orbit_kernel.cpp")
 FLAGS = ("-O3", "-march=native", "-std=c++17", "-shared", "-fPIC")
-VERSION = 3
+VERSION = 4
 #: floats after the last pixel of every buffer handed to the kernel (a chunk reads past a run's end)
 SLACK = 64
 ACTIVATIONS = {"none": 0, "tanh": 1, "sigmoid": 2}
@@ -83,6 +83,9 @@ def load() -> ctypes.CDLL | None:
     lib.ifenn_dilate.restype = None
     lib.ifenn_pixel_operator.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, ctypes.c_double, integer]
     lib.ifenn_pixel_operator.restype = None
+    lib.ifenn_pixel_mg_pcg.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, pointer, ctypes.c_double, integer,
+                                       pointer]
+    lib.ifenn_pixel_mg_pcg.restype = integer
     lib.ifenn_kernel_version.restype = integer
     if lib.ifenn_kernel_version() != VERSION:
         warnings.warn(f"{SOURCE.name}: version mismatch, using the torch orbit path", stacklevel=2)
