@@ -263,22 +263,26 @@ namespace {
 // so plain Jacobi damps them by 1/3 or more), bilinear prolongation, restriction = its transpose
 // / 4 (the preconditioner is symmetric positive definite, as CG needs), coarse operators
 // re-discretised (D / 4 per level, a averaged over the children), Jacobi sweeps on the coarsest.
+// the V-cycle is a preconditioner: single precision halves its memory traffic (the CG around
+// it, the residuals and the certificate stay in double)
+using real = float;
+
 struct MGLevel {
     int n, m;
-    double D;
+    real D = 0;
     bool rep[4];                       // bottom, top, left, right: replicate (true) or zero ghosts
-    std::vector<double> a;             // a, n x m
-    std::vector<double> diag, inv;     // a + 3 D and its inverse, n x m
-    std::vector<double> x, y;          // (n + 2) x (m + 2), padded (y: the Jacobi sweeps' second buffer)
-    std::vector<double> b, r;          // n x m
+    std::vector<real> a;             // a, n x m
+    std::vector<real> diag, inv;     // a + 3 D and its inverse, n x m
+    std::vector<real> x, y;          // (n + 2) x (m + 2), padded (y: the Jacobi sweeps' second buffer)
+    std::vector<real> b, r;          // n x m
     // bilinear transfer to the next coarser level, per direction: fine index -> two coarse
     // indices and weights (a ghost folded onto the edge or dropped; weight 0 when dropped)
     std::vector<int> row_c, col_c;
-    std::vector<double> row_w, col_w;
-    std::vector<double> tmp;           // coarse rows x fine columns
+    std::vector<real> row_w, col_w;
+    std::vector<real> tmp;           // coarse rows x fine columns
 };
 
-inline void mg_ghosts(const MGLevel& L, double* x) {
+inline void mg_ghosts(const MGLevel& L, real* x) {
     const int n = L.n, m = L.m;
     const int64_t w = m + 2;
     for (int j = 1; j <= m; ++j) {
@@ -292,22 +296,22 @@ inline void mg_ghosts(const MGLevel& L, double* x) {
 }
 
 // one row of A x (x padded, ghosts filled)
-inline double mg_row(const double* up, const double* mid, const double* down, int j, double d, double D) {
-    const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
-    const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
-    return d * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
+inline real mg_row(const real* up, const real* mid, const real* down, int j, real d, real D) {
+    const real edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+    const real corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+    return d * mid[j + 1] - D * (real(0.5) * edge + real(0.25) * corner);
 }
 
 // y = b - A x, or y = A x when b is null
-void mg_apply(const MGLevel& L, const double* x, const double* b, double* y) {
+void mg_apply(const MGLevel& L, const real* x, const real* b, real* y) {
     const int n = L.n, m = L.m;
     const int64_t w = m + 2;
     for (int i = 0; i < n; ++i) {
-        const double* up = x + i * w;
-        const double* d = L.diag.data() + static_cast<int64_t>(i) * m;
-        double* o = y + static_cast<int64_t>(i) * m;
+        const real* up = x + i * w;
+        const real* d = L.diag.data() + static_cast<int64_t>(i) * m;
+        real* o = y + static_cast<int64_t>(i) * m;
         if (b) {
-            const double* bb = b + static_cast<int64_t>(i) * m;
+            const real* bb = b + static_cast<int64_t>(i) * m;
             for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
         } else {
             for (int j = 0; j < m; ++j) o[j] = mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
@@ -323,22 +327,22 @@ void mg_jacobi(MGLevel& L, int sweeps, bool from_zero) {
     int done = 0;
     if (from_zero) {
         for (int i = 0; i < n; ++i) {
-            double* xi = L.x.data() + (i + 1) * w + 1;
-            const double* bi = L.b.data() + static_cast<int64_t>(i) * m;
-            const double* vi = L.inv.data() + static_cast<int64_t>(i) * m;
+            real* xi = L.x.data() + (i + 1) * w + 1;
+            const real* bi = L.b.data() + static_cast<int64_t>(i) * m;
+            const real* vi = L.inv.data() + static_cast<int64_t>(i) * m;
             for (int j = 0; j < m; ++j) xi[j] = bi[j] * vi[j];
         }
         done = 1;
     }
     mg_ghosts(L, L.x.data());
     for (; done < sweeps; ++done) {
-        const double* x = L.x.data();
+        const real* x = L.x.data();
         for (int i = 0; i < n; ++i) {
-            const double* up = x + i * w;
-            const double* d = L.diag.data() + static_cast<int64_t>(i) * m;
-            const double* vi = L.inv.data() + static_cast<int64_t>(i) * m;
-            const double* bi = L.b.data() + static_cast<int64_t>(i) * m;
-            double* yi = L.y.data() + (i + 1) * w + 1;
+            const real* up = x + i * w;
+            const real* d = L.diag.data() + static_cast<int64_t>(i) * m;
+            const real* vi = L.inv.data() + static_cast<int64_t>(i) * m;
+            const real* bi = L.b.data() + static_cast<int64_t>(i) * m;
+            real* yi = L.y.data() + (i + 1) * w + 1;
             for (int j = 0; j < m; ++j) yi[j] = up[w + j + 1] + vi[j] * (bi[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D));
         }
         std::swap(L.x, L.y);
@@ -349,7 +353,7 @@ void mg_jacobi(MGLevel& L, int sweeps, bool from_zero) {
 // cell-centred bilinear interpolation in one direction: fine i takes 3/4 of its parent i / 2
 // and 1/4 of the parent's neighbour towards i; a neighbour beyond the edge is the parent
 // itself (replicate) or zero (dropped)
-void mg_transfer(int nf, int nc, bool rep_low, bool rep_high, std::vector<int>& idx, std::vector<double>& wgt) {
+void mg_transfer(int nf, int nc, bool rep_low, bool rep_high, std::vector<int>& idx, std::vector<real>& wgt) {
     idx.assign(2 * nf, 0);
     wgt.assign(2 * nf, 0.0);
     for (int i = 0; i < nf; ++i) {
@@ -370,18 +374,18 @@ void mg_restrict(MGLevel& F, MGLevel& C) {  // C.b = P^T F.r / 4, separably
     const int mf = F.m, mc = C.m;
     std::fill(F.tmp.begin(), F.tmp.end(), 0.0);
     for (int i = 0; i < F.n; ++i) {
-        const double* ri = F.r.data() + static_cast<int64_t>(i) * mf;
+        const real* ri = F.r.data() + static_cast<int64_t>(i) * mf;
         for (int k = 0; k < 2; ++k) {
-            const double wk = 0.25 * F.row_w[2 * i + k];
+            const real wk = 0.25f * F.row_w[2 * i + k];
             if (wk == 0.0) continue;
-            double* t = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + k]) * mf;
+            real* t = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + k]) * mf;
             for (int j = 0; j < mf; ++j) t[j] += wk * ri[j];
         }
     }
     std::fill(C.b.begin(), C.b.end(), 0.0);
     for (int I = 0; I < C.n; ++I) {
-        const double* t = F.tmp.data() + static_cast<int64_t>(I) * mf;
-        double* out = C.b.data() + static_cast<int64_t>(I) * mc;
+        const real* t = F.tmp.data() + static_cast<int64_t>(I) * mf;
+        real* out = C.b.data() + static_cast<int64_t>(I) * mc;
         for (int j = 0; j < mf; ++j) {
             out[F.col_c[2 * j]] += F.col_w[2 * j] * t[j];
             out[F.col_c[2 * j + 1]] += F.col_w[2 * j + 1] * t[j];
@@ -392,17 +396,17 @@ void mg_restrict(MGLevel& F, MGLevel& C) {  // C.b = P^T F.r / 4, separably
 void mg_prolong_add(MGLevel& F, const MGLevel& C) {  // F.x += P C.x, separably
     const int mc = C.m;
     const int64_t wc = mc + 2, wf = F.m + 2;
-    const double* xc = C.x.data();
+    const real* xc = C.x.data();
     for (int I = 0; I < C.n; ++I) {  // tmp (coarse rows x fine columns) = C.x P_x^T
-        const double* row = xc + (I + 1) * wc + 1;
-        double* t = F.tmp.data() + static_cast<int64_t>(I) * F.m;
+        const real* row = xc + (I + 1) * wc + 1;
+        real* t = F.tmp.data() + static_cast<int64_t>(I) * F.m;
         for (int j = 0; j < F.m; ++j) t[j] = F.col_w[2 * j] * row[F.col_c[2 * j]] + F.col_w[2 * j + 1] * row[F.col_c[2 * j + 1]];
     }
     for (int i = 0; i < F.n; ++i) {
-        const double* t0 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i]) * F.m;
-        const double* t1 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + 1]) * F.m;
-        const double w0 = F.row_w[2 * i], w1 = F.row_w[2 * i + 1];
-        double* xi = F.x.data() + (i + 1) * wf + 1;
+        const real* t0 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i]) * F.m;
+        const real* t1 = F.tmp.data() + static_cast<int64_t>(F.row_c[2 * i + 1]) * F.m;
+        const real w0 = F.row_w[2 * i], w1 = F.row_w[2 * i + 1];
+        real* xi = F.x.data() + (i + 1) * wf + 1;
         for (int j = 0; j < F.m; ++j) xi[j] += w0 * t0[j] + w1 * t1[j];
     }
 }
@@ -433,7 +437,7 @@ void mg_vcycle(std::vector<MGLevel>& levels, size_t k) {  // levels[k].x from le
 struct MGWork {
     int n, m, rep[4];
     std::vector<MGLevel> levels;
-    std::vector<double> r, z, q, p, inv_a;
+    std::vector<double> r, z, q, p, inv_a, diag;
 };
 
 MGWork& mg_work(int n, int m, const int* replicate) {
@@ -469,6 +473,7 @@ MGWork& mg_work(int n, int m, const int* replicate) {
     }
     const size_t size = static_cast<size_t>(n) * m;
     work->r.assign(size, 0.0), work->z.assign(size, 0.0), work->q.assign(size, 0.0), work->inv_a.assign(size, 0.0);
+    work->diag.assign(size, 0.0);
     work->p.assign(static_cast<size_t>(n + 2) * (m + 2), 0.0);
     cache.push_back(std::move(work));
     return *cache.back();
@@ -477,26 +482,63 @@ MGWork& mg_work(int n, int m, const int* replicate) {
 // the coefficients of every level for this a: coarse a = the mean of its (up to 4) children
 void mg_coefficients(MGWork& work, const double* a, double D) {
     std::vector<MGLevel>& levels = work.levels;
-    std::copy(a, a + static_cast<size_t>(work.n) * work.m, levels[0].a.begin());
-    levels[0].D = D;
+    const size_t size = static_cast<size_t>(work.n) * work.m;
+    for (size_t c = 0; c < size; ++c) {
+        levels[0].a[c] = static_cast<real>(a[c]);
+        work.diag[c] = a[c] + 3.0 * D;
+        work.inv_a[c] = 1.0 / a[c];
+    }
+    double level_D = D;
+    levels[0].D = static_cast<real>(D);
     for (size_t k = 1; k < levels.size(); ++k) {
         const MGLevel& F = levels[k - 1];
         MGLevel& C = levels[k];
-        C.D = F.D / 4.0;
+        level_D /= 4.0;
+        C.D = static_cast<real>(level_D);
         for (int I = 0; I < C.n; ++I) {
             const int i0 = 2 * I, i1 = std::min(2 * I + 1, F.n - 1);
-            const double* f0 = F.a.data() + static_cast<size_t>(i0) * F.m;
-            const double* f1 = F.a.data() + static_cast<size_t>(i1) * F.m;
-            double* c = C.a.data() + static_cast<size_t>(I) * C.m;
+            const real* f0 = F.a.data() + static_cast<size_t>(i0) * F.m;
+            const real* f1 = F.a.data() + static_cast<size_t>(i1) * F.m;
+            real* c = C.a.data() + static_cast<size_t>(I) * C.m;
             for (int J = 0; J < C.m; ++J) {
                 const int j0 = 2 * J, j1 = std::min(2 * J + 1, F.m - 1);
-                c[J] = 0.25 * (f0[j0] + f0[j1] + f1[j0] + f1[j1]);  // an odd edge counts its last row / column twice
+                c[J] = real(0.25) * (f0[j0] + f0[j1] + f1[j0] + f1[j1]);  // an odd edge counts its last row / column twice
             }
         }
     }
     for (MGLevel& L : levels)
-        for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + 3.0 * L.D, L.inv[c] = 1.0 / L.diag[c];
-    for (size_t c = 0; c < work.inv_a.size(); ++c) work.inv_a[c] = 1.0 / a[c];
+        for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + real(3) * L.D, L.inv[c] = real(1) / L.diag[c];
+}
+
+// q = A p in double (p padded, ghosts filled; diag = a + 3 D)
+void cg_apply(const double* p, const double* diag, double D, int n, int m, double* q) {
+    const int64_t w = m + 2;
+    for (int i = 0; i < n; ++i) {
+        const double* up = p + i * w;
+        const double* mid = up + w;
+        const double* down = mid + w;
+        const double* d = diag + static_cast<int64_t>(i) * m;
+        double* o = q + static_cast<int64_t>(i) * m;
+        for (int j = 0; j < m; ++j) {
+            const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+            const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+            o[j] = d[j] * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
+        }
+    }
+}
+
+// the ghosts of a padded double vector, as mg_ghosts
+void cg_ghosts(const MGLevel& L, double* x) {
+    const int n = L.n, m = L.m;
+    const int64_t w = m + 2;
+    for (int j = 1; j <= m; ++j) {
+        x[j] = L.rep[0] ? x[w + j] : 0.0;
+        x[(n + 1) * w + j] = L.rep[1] ? x[n * w + j] : 0.0;
+    }
+    for (int i = 0; i <= n + 1; ++i) {
+        x[i * w] = L.rep[2] ? x[i * w + 1] : 0.0;
+        x[i * w + m + 1] = L.rep[3] ? x[i * w + m] : 0.0;
+    }
 }
 
 }  // namespace
@@ -520,7 +562,7 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
         return most;
     };
     auto precondition = [&]() {
-        std::copy(r.begin(), r.end(), top.b.begin());
+        for (int64_t c = 0; c < size; ++c) top.b[c] = static_cast<real>(r[c]);
         mg_vcycle(levels, 0);
         for (int i = 0; i < n; ++i)
             for (int j = 0; j < m; ++j) z[static_cast<int64_t>(i) * m + j] = top.x[(i + 1) * w + j + 1];
@@ -533,8 +575,8 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     double rz = 0.0;
     for (int64_t c = 0; c < size; ++c) rz += r[c] * z[c];
     for (int iteration = 1; iteration <= maxiter; ++iteration) {
-        mg_ghosts(top, p.data());
-        mg_apply(top, p.data(), nullptr, q.data());
+        cg_ghosts(top, p.data());
+        cg_apply(p.data(), work.diag.data(), D, n, m, q.data());
         double pq = 0.0;
         for (int i = 0; i < n; ++i)
             for (int j = 0; j < m; ++j) pq += p[(i + 1) * w + j + 1] * q[static_cast<int64_t>(i) * m + j];
