@@ -98,6 +98,7 @@ def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | P
                                                            if "verify_corrected_fraction" in history else 0.0),
                              "verify_residual_after_max": (history.verify_residual_after.max()
                                                            if "verify_residual_after" in history else float("nan")),
+                             "verify_solve_work": history.verify_solve_work.mean() if "verify_solve_work" in history else 0.0,
                              "final_force": history.reaction_force.iloc[-1]})
     table = pd.DataFrame(rows)
     fem = table[table.method == "fem"].set_index("run").t_phase_field_s
