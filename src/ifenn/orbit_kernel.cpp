@@ -282,7 +282,9 @@ struct MGLevel {
     std::vector<real> tmp;           // coarse rows x fine columns
 };
 
-inline void mg_ghosts(const MGLevel& L, real* x) {
+// the ghosts of a padded vector on L's box (single for the V-cycle, double for the CG)
+template <class T>
+inline void mg_ghosts(const MGLevel& L, T* x) {
     const int n = L.n, m = L.m;
     const int64_t w = m + 2;
     for (int j = 1; j <= m; ++j) {
@@ -527,19 +529,6 @@ void cg_apply(const double* p, const double* diag, double D, int n, int m, doubl
     }
 }
 
-// the ghosts of a padded double vector, as mg_ghosts
-void cg_ghosts(const MGLevel& L, double* x) {
-    const int n = L.n, m = L.m;
-    const int64_t w = m + 2;
-    for (int j = 1; j <= m; ++j) {
-        x[j] = L.rep[0] ? x[w + j] : 0.0;
-        x[(n + 1) * w + j] = L.rep[1] ? x[n * w + j] : 0.0;
-    }
-    for (int i = 0; i <= n + 1; ++i) {
-        x[i * w] = L.rep[2] ? x[i * w + 1] : 0.0;
-        x[i * w + m + 1] = L.rep[3] ? x[i * w + m] : 0.0;
-    }
-}
 
 }  // namespace
 
@@ -575,7 +564,7 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     double rz = 0.0;
     for (int64_t c = 0; c < size; ++c) rz += r[c] * z[c];
     for (int iteration = 1; iteration <= maxiter; ++iteration) {
-        cg_ghosts(top, p.data());
+        mg_ghosts(top, p.data());
         cg_apply(p.data(), work.diag.data(), D, n, m, q.data());
         double pq = 0.0;
         for (int i = 0; i < n; ++i)
