@@ -512,27 +512,51 @@ void mg_coefficients(MGWork& work, const double* a, double D) {
         for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + real(3) * L.D, L.inv[c] = real(1) / L.diag[c];
 }
 
-// q = A p in double (p padded, ghosts filled; diag = a + 3 D)
-void cg_apply(const double* p, const double* diag, double D, int n, int m, double* q) {
-    const int64_t w = m + 2;
-    for (int i = 0; i < n; ++i) {
-        const double* up = p + i * w;
-        const double* mid = up + w;
-        const double* down = mid + w;
-        const double* d = diag + static_cast<int64_t>(i) * m;
-        double* o = q + static_cast<int64_t>(i) * m;
-        for (int j = 0; j < m; ++j) {
-            const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
-            const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
-            o[j] = d[j] * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
-        }
-    }
-}
-
-
 }  // namespace
 
 extern "C" {
+
+// The residual R = a c - D (K9*(c) - 3 c) - 2 H of the pixel equation (normalised: R / a) on the
+// box [r0, r1) x [c0, c1) of an ny x nx image, read from the image itself: neighbours beyond the
+// image edge are the edge's values (replicate = 1: zero flux) or zero. out has the box's shape.
+void ifenn_pixel_residual(const double* phi, const double* history, double* out, int ny, int nx, int r0, int r1, int c0, int c1,
+                          double a0, double D, int replicate, int normalised) {
+    std::vector<double> zeros(static_cast<size_t>(nx) + 2, 0.0), rows[3];
+    for (auto& row : rows) row.assign(static_cast<size_t>(nx) + 2, 0.0);
+    const int m = c1 - c0;
+    for (int i = r0; i < r1; ++i) {
+        // the three image rows around i, each with a one-pixel frame (the padding)
+        for (int k = 0; k < 3; ++k) {
+            int source = i + k - 1;
+            double* row = rows[k].data();
+            if (source < 0 || source >= ny) {
+                if (!replicate) {
+                    std::fill(rows[k].begin(), rows[k].end(), 0.0);
+                    continue;
+                }
+                source = source < 0 ? 0 : ny - 1;
+            }
+            const double* image = phi + static_cast<int64_t>(source) * nx;
+            const int lo = std::max(c0 - 1, 0), hi = std::min(c1 + 1, nx);
+            std::copy(image + lo, image + hi, row + lo + 1);
+            row[0] = replicate ? image[0] : 0.0;
+            row[nx + 1] = replicate ? image[nx - 1] : 0.0;
+        }
+        const double* up = rows[0].data() + c0;  // index j - c0 + 1 is column j
+        const double* mid = rows[1].data() + c0;
+        const double* down = rows[2].data() + c0;
+        const double* h = history + static_cast<int64_t>(i) * nx + c0;
+        double* o = out + static_cast<int64_t>(i - r0) * m;
+        for (int j = 0; j < m; ++j) {
+            const double c = mid[j + 1];
+            const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+            const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+            const double a = a0 + 2.0 * h[j];
+            const double R = a * c - D * (0.5 * edge + 0.25 * corner - 3.0 * c) - 2.0 * h[j];
+            o[j] = normalised ? R / a : R;
+        }
+    }
+}
 
 int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n, int m, double D, const int* replicate,
                        double target, int maxiter, double* worst) {
@@ -540,54 +564,96 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     mg_coefficients(work, a, D);
     std::vector<MGLevel>& levels = work.levels;
     MGLevel& top = levels[0];
-    const int64_t size = static_cast<int64_t>(n) * m, w = m + 2;
-    std::vector<double>&r = work.r, &z = work.z, &q = work.q, &p = work.p;
+    const int64_t w = m + 2;
+    double *r = work.r.data(), *z = work.z.data(), *q = work.q.data(), *p = work.p.data();
     const double* inv_a = work.inv_a.data();
-    std::copy(rhs, rhs + size, r.begin());
-    std::fill(delta, delta + size, 0.0);
-    auto max_scaled = [&]() {
-        double most = 0.0;
-        for (int64_t c = 0; c < size; ++c) most = std::max(most, std::abs(r[c]) * inv_a[c]);
-        return most;
-    };
-    auto precondition = [&]() {
-        for (int64_t c = 0; c < size; ++c) top.b[c] = static_cast<real>(r[c]);
-        mg_vcycle(levels, 0);
-        for (int i = 0; i < n; ++i)
-            for (int j = 0; j < m; ++j) z[static_cast<int64_t>(i) * m + j] = top.x[(i + 1) * w + j + 1];
-    };
-    *worst = max_scaled();
+    const double* diag = work.diag.data();
+    // the loops below fuse what they can and keep four partial sums: a single running sum would
+    // serialise the additions (no reassociation without -ffast-math), and these vectors are
+    // streamed once per pass
+    double most = 0.0;
+    for (int64_t c = 0; c < static_cast<int64_t>(n) * m; ++c) {
+        r[c] = rhs[c];
+        delta[c] = 0.0;
+        most = std::max(most, std::abs(r[c]) * inv_a[c]);
+    }
+    *worst = most;
     if (*worst <= target) return 0;
-    precondition();
-    for (int i = 0; i < n; ++i)
-        for (int j = 0; j < m; ++j) p[(i + 1) * w + j + 1] = z[static_cast<int64_t>(i) * m + j];
-    double rz = 0.0;
-    for (int64_t c = 0; c < size; ++c) rz += r[c] * z[c];
+    // z = M r (one V-cycle) and r . z
+    auto precondition = [&]() {
+        for (int64_t c = 0; c < static_cast<int64_t>(n) * m; ++c) top.b[c] = static_cast<real>(r[c]);
+        mg_vcycle(levels, 0);
+        double sums[4] = {0.0, 0.0, 0.0, 0.0};
+        for (int i = 0; i < n; ++i) {
+            const real* x = top.x.data() + (i + 1) * w + 1;
+            double* zi = z + static_cast<int64_t>(i) * m;
+            const double* ri = r + static_cast<int64_t>(i) * m;
+            int j = 0;
+            for (; j + 4 <= m; j += 4)
+                for (int k = 0; k < 4; ++k) zi[j + k] = x[j + k], sums[k] += ri[j + k] * zi[j + k];
+            for (; j < m; ++j) zi[j] = x[j], sums[0] += ri[j] * zi[j];
+        }
+        return (sums[0] + sums[1]) + (sums[2] + sums[3]);
+    };
+    double rz = precondition();
+    for (int i = 0; i < n; ++i) std::copy(z + static_cast<int64_t>(i) * m, z + static_cast<int64_t>(i + 1) * m, p + (i + 1) * w + 1);
     for (int iteration = 1; iteration <= maxiter; ++iteration) {
-        mg_ghosts(top, p.data());
-        cg_apply(p.data(), work.diag.data(), D, n, m, q.data());
-        double pq = 0.0;
-        for (int i = 0; i < n; ++i)
-            for (int j = 0; j < m; ++j) pq += p[(i + 1) * w + j + 1] * q[static_cast<int64_t>(i) * m + j];
-        const double alpha = rz / pq;
-        for (int i = 0; i < n; ++i)
-            for (int j = 0; j < m; ++j) {
-                const int64_t c = static_cast<int64_t>(i) * m + j;
-                delta[c] += alpha * p[(i + 1) * w + j + 1];
-                r[c] -= alpha * q[c];
+        // q = A p and p . q
+        mg_ghosts(top, p);
+        double sums[4] = {0.0, 0.0, 0.0, 0.0};
+        for (int i = 0; i < n; ++i) {
+            const double* up = p + i * w;
+            const double* mid = up + w;
+            const double* down = mid + w;
+            const double* d = diag + static_cast<int64_t>(i) * m;
+            double* o = q + static_cast<int64_t>(i) * m;
+            int j = 0;
+            for (; j + 4 <= m; j += 4)
+                for (int k = 0; k < 4; ++k) {
+                    const int jj = j + k;
+                    const double edge = mid[jj] + mid[jj + 2] + up[jj + 1] + down[jj + 1];
+                    const double corner = up[jj] + up[jj + 2] + down[jj] + down[jj + 2];
+                    o[jj] = d[jj] * mid[jj + 1] - D * (0.5 * edge + 0.25 * corner);
+                    sums[k] += mid[jj + 1] * o[jj];
+                }
+            for (; j < m; ++j) {
+                const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+                const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+                o[j] = d[j] * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
+                sums[0] += mid[j + 1] * o[j];
             }
-        *worst = max_scaled();
+        }
+        const double alpha = rz / ((sums[0] + sums[1]) + (sums[2] + sums[3]));
+        // delta += alpha p, r -= alpha q, and the certificate's max |r| / a
+        double largest[4] = {0.0, 0.0, 0.0, 0.0};
+        for (int i = 0; i < n; ++i) {
+            const double* pi = p + (i + 1) * w + 1;
+            const int64_t row = static_cast<int64_t>(i) * m;
+            int j = 0;
+            for (; j + 4 <= m; j += 4)
+                for (int k = 0; k < 4; ++k) {
+                    const int64_t c = row + j + k;
+                    delta[c] += alpha * pi[j + k];
+                    r[c] -= alpha * q[c];
+                    largest[k] = std::max(largest[k], std::abs(r[c]) * inv_a[c]);
+                }
+            for (; j < m; ++j) {
+                const int64_t c = row + j;
+                delta[c] += alpha * pi[j];
+                r[c] -= alpha * q[c];
+                largest[0] = std::max(largest[0], std::abs(r[c]) * inv_a[c]);
+            }
+        }
+        *worst = std::max(std::max(largest[0], largest[1]), std::max(largest[2], largest[3]));
         if (*worst <= target) return iteration;
-        precondition();
-        double rz_new = 0.0;
-        for (int64_t c = 0; c < size; ++c) rz_new += r[c] * z[c];
+        const double rz_new = precondition();
         const double beta = rz_new / rz;
         rz = rz_new;
-        for (int i = 0; i < n; ++i)
-            for (int j = 0; j < m; ++j) {
-                double& pc = p[(i + 1) * w + j + 1];
-                pc = z[static_cast<int64_t>(i) * m + j] + beta * pc;
-            }
+        for (int i = 0; i < n; ++i) {
+            double* pi = p + (i + 1) * w + 1;
+            const double* zi = z + static_cast<int64_t>(i) * m;
+            for (int j = 0; j < m; ++j) pi[j] = zi[j] + beta * pi[j];
+        }
     }
     return -1;
 }

@@ -83,6 +83,9 @@ def load() -> ctypes.CDLL | None:
     lib.ifenn_dilate.restype = None
     lib.ifenn_pixel_operator.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, ctypes.c_double, integer]
     lib.ifenn_pixel_operator.restype = None
+    lib.ifenn_pixel_residual.argtypes = [pointer, pointer, pointer, integer, integer, integer, integer, integer, integer,
+                                         ctypes.c_double, ctypes.c_double, integer, integer]
+    lib.ifenn_pixel_residual.restype = None
     lib.ifenn_pixel_mg_pcg.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, pointer, ctypes.c_double, integer,
                                        pointer]
     lib.ifenn_pixel_mg_pcg.restype = integer

@@ -137,10 +137,21 @@ class PixelEquation:
         out = (self.reaction0 + 2.0 * history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
         return out - 2.0 * history if with_rhs else out
 
-    def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box) -> np.ndarray:
-        """Normalised residual r on ``box`` (its own shape)."""
+    def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool = True) -> np.ndarray:
+        """Residual on ``box`` (its own shape): r = R / (Gc/lc + 2H), or R itself; in one pass of
+        the compiled kernel where it builds (phi and H float64, C-contiguous: the verified step's
+        own images), else in numpy."""
+        lib = _kernel()
+        if lib is not None and phi.dtype == history.dtype == np.float64 and phi.flags.c_contiguous and history.flags.c_contiguous:
+            ny, nx = phi.shape
+            out = np.empty((box[0].stop - box[0].start, box[1].stop - box[1].start))
+            lib.ifenn_pixel_residual(phi.ctypes.data, history.ctypes.data, out.ctypes.data, ny, nx, box[0].start, box[0].stop,
+                                     box[1].start, box[1].stop, self.reaction0, self.diffusion, int(self.padding == "replicate"),
+                                     int(normalised))
+            return out
         h = history[box]
-        return self._operator(self._extended(phi, box), h, True) / (self.reaction0 + 2.0 * h)
+        residual = self._operator(self._extended(phi, box), h, True)
+        return residual / (self.reaction0 + 2.0 * h) if normalised else residual
 
     def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
         """A x on a box (``history``: H there) for x with zero Dirichlet data around it (the
@@ -177,20 +188,20 @@ class PixelEquation:
 
     def solve_box(self, phi: np.ndarray, history: np.ndarray, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
         """Solve the pixel equation on ``box`` in place in ``phi`` (the values around the box
-        fixed), to max |r| <= ``target`` inside it, by conjugate gradients preconditioned with
-        the constant-coefficient inverse (:meth:`_preconditioner`). Returns (max |r| reached,
-        iterations); raises if ``maxiter`` iterations do not get there."""
+        fixed), to max |r| <= ``target`` inside it, by conjugate gradients preconditioned with a
+        multigrid V-cycle (compiled kernel), else with the constant-coefficient inverse
+        (:meth:`_preconditioner`). Returns (max |r| reached, iterations); raises if ``maxiter``
+        iterations do not get there."""
         ny, nx = phi.shape
         edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
         h = np.ascontiguousarray(history[box])
         reaction = self.reaction0 + 2.0 * h
-        ext = self._extended(phi, box)
-        centre = ext[1:-1, 1:-1]
-        # the correction delta solves A delta = -R(phi), zero around the box
-        residual = -self._operator(ext, h, True)
         lib = _kernel()
         if lib is not None:  # multigrid-preconditioned CG, compiled
-            delta = np.empty_like(centre)
+            # the correction delta solves A delta = -R(phi), zero around the box
+            residual = -self.residual_on(phi, history, box, normalised=False)
+            centre = phi[box]
+            delta = np.empty(centre.shape)
             replicate = np.array(edges if self.padding == "replicate" else (False,) * 4, dtype=np.intc)
             worst = np.zeros(1)
             iterations = lib.ifenn_pixel_mg_pcg(residual.ctypes.data, np.ascontiguousarray(reaction).ctypes.data, delta.ctypes.data,
@@ -199,8 +210,11 @@ class PixelEquation:
             if iterations < 0:
                 raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                    f"(reached {worst[0]:g})")
-            phi[box] = centre + delta
+            phi[box] += delta
             return float(worst[0]), int(iterations)
+        ext = self._extended(phi, box)
+        centre = ext[1:-1, 1:-1]
+        residual = -self._operator(ext, h, True)
         worst = float(np.max(np.abs(residual) / reaction))
         iterations = 0
         delta = np.zeros_like(centre)
