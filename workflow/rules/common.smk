@@ -5,7 +5,7 @@ import sys
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn import stability as _stability
-from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
+from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, switch_over, training_spec, validate_config
 from ifenn.metrics import process_zone_pairs
 
 try:
@@ -41,14 +41,16 @@ def fem_launcher(wildcards):
 
 
 def ifenn_inputs(wildcards):
+    """An IFENN run's spec, mesh, network and, unless it starts from the initial state
+    (switch_over 'start'), the FEM run it continues."""
     entry = config["ifenn_runs"][wildcards.run]
     fem_run = entry["fem_run"]
     inputs = {
         "spec": f"results/ifenn/{wildcards.run}/spec.json",
         "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
-        "fem_fields": f"results/fem/{fem_run}/fields.h5",
-        "fem_history": f"results/fem/{fem_run}/history.csv",
     }
+    if switch_over(config, wildcards.run)[0] != "start":
+        inputs.update(fem_fields=f"results/fem/{fem_run}/fields.h5", fem_history=f"results/fem/{fem_run}/history.csv")
     if entry.get("predictor", config["ifenn"]["predictor"]) == "picnn":
         inputs["model"] = "results/picnn/model.pt"
     return inputs
