@@ -265,7 +265,7 @@ def _switch_over_problems(config: dict) -> list[str]:
     for name, entry in runs.items():
         criterion, increment = switch_over(config, name)
         key = f"ifenn_runs.{name}" if "switch_over" in entry else "ifenn"
-        ikey = f"ifenn_runs.{name}.switch_increment" if "switch_increment" in entry else "ifenn.switch_increment"
+        ikey = f"ifenn_runs.{name}.switch_increment" if {"switch_increment", "switch_over"} & set(entry) else "ifenn.switch_increment"
         if criterion not in SWITCH_OVER:  # the schema refuses it already; kept for configs built in code
             problems.append(f"config key '{key}.switch_over': '{criterion}' is not a criterion; allowed: {list(SWITCH_OVER)}")
         elif criterion == "increment":
