@@ -118,3 +118,19 @@ def error_sources_inputs(wildcards):
         paths |= {case["spec"], case["mesh"], case["ifenn_history"], case["model"],
                   f"{case['fem_dir']}/fields.h5", f"{case['fem_dir']}/history.csv"}
     return sorted(paths)
+
+
+def whole_path_runs():
+    """Whole-path IFENN run -> the FEM run of the same scene and schedule (config 'whole_path')."""
+    return {run: config["ifenn_runs"][run]["fem_run"] for run in config["whole_path"]["runs"]}
+
+
+def whole_path_inputs(wildcards):
+    """FEM and whole-path histories; for the network replay the spec, the FEM fields and the network."""
+    setup = config["whole_path"]
+    paths = {f"results/fem/{fem}/history.csv" for fem in whole_path_runs().values()}
+    paths |= {f"results/ifenn/{run}/history.csv" for run in setup["runs"]}
+    for run in setup.get("network_runs", []):
+        paths |= {f"results/ifenn/{run}/spec.json", f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",
+                  "results/picnn/model.pt"}
+    return sorted(paths)

@@ -4,20 +4,6 @@
 # ifenn.whole_run_benchmark).
 
 
-def whole_path_runs():
-    return {run: config["ifenn_runs"][run]["fem_run"] for run in config["whole_path"]["runs"]}
-
-
-def whole_path_inputs(wildcards):
-    setup = config["whole_path"]
-    paths = {f"results/fem/{fem}/history.csv" for fem in whole_path_runs().values()}
-    paths |= {f"results/ifenn/{run}/history.csv" for run in setup["runs"]}
-    for run in setup.get("network_runs", []):
-        paths |= {f"results/ifenn/{run}/spec.json", f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",
-                  "results/picnn/model.pt"}
-    return sorted(paths)
-
-
 rule whole_path_table:
     input:
         whole_path_inputs,
