@@ -7,7 +7,9 @@ Both runs take the same loads from u = 0; neither copies the other. What is comp
 - the post-peak force error: over the IFENN increments with u > FEM's u at the peak (and within
   FEM's u range), |F_IFENN| - |F_FEM| with FEM interpolated at IFENN's u; RMS and largest value,
   divided by FEM's peak;
-- the final force over FEM's peak, against FEM's own.
+- the final force over FEM's peak, against FEM's own;
+- where the load drop passes half of FEM's peak, in u (``u_half_drop_*``; NaN where it does not):
+  in a brittle drop a small shift in u is a large force error.
 
 Each is marked as met against ``targets`` (config 'whole_path.targets', fractions). The stages:
 "pre-nucleation" = the increments before FEM's phi-threshold increment (max nodal phi >
@@ -61,6 +63,11 @@ def whole_path_comparison(fem: pd.DataFrame, ifenn: pd.DataFrame, switch_phi_max
         "post_peak_max_error": float(np.abs(error).max() / peak) if after.any() else np.nan,
         "final_force_fraction_fem": f_fem[-1] / peak, "final_force_fraction_ifenn": f_ifenn[-1] / peak,
     }
+    # where the load drop passes half of FEM's peak (a brittle drop: a small shift in u is a large force error)
+    for method, u, f, k in (("fem", u_fem, f_fem, k_fem), ("ifenn", u_ifenn, f_ifenn, k_ifenn)):
+        below = np.nonzero(f[k:] < 0.5 * peak)[0]
+        row[f"u_half_drop_{method}"] = float(u[k + below[0]]) if below.size else np.nan
+    row["u_half_drop_rel_error"] = row["u_half_drop_ifenn"] / row["u_half_drop_fem"] - 1.0
     row["meets_peak_force"] = bool(abs(row["peak_force_rel_error"]) <= targets["peak_force"])
     row["meets_u_peak"] = bool(abs(row["u_peak_rel_error"]) <= targets["u_peak"])
     row["meets_post_peak_rms"] = bool(row["post_peak_rms_error"] <= targets["post_peak_rms"])
