@@ -31,6 +31,7 @@ include: "workflow/rules/metrics.smk"
 include: "workflow/rules/figures.smk"
 include: "workflow/rules/stability.smk"
 include: "workflow/rules/error_sources.smk"
+include: "workflow/rules/whole_path.smk"
 
 
 rule all:
@@ -54,3 +55,5 @@ rule all:
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],
         ["results/tables/error_sources.csv", "results/figures/error_sources.png"] if config.get("error_sources") else [],
         "results/benchmarks/increment_speed.csv" if config.get("increment_benchmark") else [],
+        ["results/tables/whole_path.csv", "results/figures/whole_path.png"] if config.get("whole_path") else [],
+        ["results/benchmarks/whole_run_speed.csv", "results/figures/whole_run_speed.png"] if config.get("whole_run_benchmark") else [],

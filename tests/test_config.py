@@ -54,3 +54,45 @@ def test_defaults_are_filled(paper_config):
     config = copy.deepcopy(paper_config)
     del config["material"]["residual_stiffness"]
     assert validate_config(config)["material"]["residual_stiffness"] == 0.0
+
+
+@pytest.mark.parametrize(
+    "mutate, expected",
+    [
+        (lambda c: c["ifenn"].update(switch_over="never"), ["ifenn.switch_over", "'never'", "phi_threshold", "start"]),
+        (lambda c: c["ifenn_runs"]["snt1-I-whole"].update(switch_over="first"), ["ifenn_runs.snt1-I-whole.switch_over", "'first'"]),
+        (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_over="increment"),
+         ["ifenn_runs.snt1-I.switch_increment", "needs the FEM increment", "1..349"]),
+        (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_over="increment", switch_increment=350),
+         ["ifenn_runs.snt1-I.switch_increment", "350", "allowed 1..349"]),
+        (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_increment=100), ["ifenn_runs.snt1-I.switch_increment", "only with switch_over 'increment'"]),
+        (lambda c: c["ifenn"].update(switch_increment=100), ["ifenn.switch_increment", "only with switch_over 'increment'"]),
+        (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_over="increment", switch_increment=0), ["switch_increment", "minimum of 1"]),
+        (lambda c: c["whole_path"]["runs"].append("snt1-I"), ["whole_path.runs[7]", "'snt1-I'", "needs switch_over 'start'"]),
+        (lambda c: c["whole_run_benchmark"]["runs"].append("snt9-whole"), ["whole_run_benchmark.runs[3]", "'snt9-whole'", "allowed"]),
+        (lambda c: c["whole_path"].update(network_runs=["snt1-I-verified"]), ["whole_path.network_runs[0]", "not in whole_path.runs"]),
+    ],
+)
+def test_bad_switch_over_is_refused_naming_the_key(paper_config, mutate, expected):
+    config = copy.deepcopy(paper_config)
+    mutate(config)
+    with pytest.raises(ConfigError) as info:
+        validate_config(config)
+    for text in expected:
+        assert text in str(info.value), str(info.value)
+
+
+def test_switch_over_in_the_specs(paper_config):
+    """The published runs' specs carry no switch-over keys (the paper's threshold, unchanged
+    specs and hashes); whole-path runs say 'start'; a given increment is saved by the FEM run."""
+    from ifenn.config import ifenn_run_spec
+
+    assert "switch_over" not in ifenn_run_spec(paper_config, "snt1-II-verified")
+    whole = ifenn_run_spec(paper_config, "snt1-II-whole")
+    assert whole["switch_over"] == "start" and "switch_increment" not in whole and whole["verification"]["enabled"]
+    assert whole["load"] == fem_run_spec(paper_config, "snt1-II")["load"]
+    config = copy.deepcopy(paper_config)
+    config["ifenn_runs"]["snt1-I-at-123"] = {"fem_run": "snt1-I", "switch_over": "increment", "switch_increment": 123}
+    config = validate_config(config)
+    assert ifenn_run_spec(config, "snt1-I-at-123")["switch_increment"] == 123
+    assert 123 in fem_run_spec(config, "snt1-I")["save_fields"] and 123 not in fem_run_spec(paper_config, "snt1-I")["save_fields"]

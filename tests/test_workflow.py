@@ -158,3 +158,23 @@ def test_quick_profile_verified_runs_track_fem(quick_workflow):
         error = post_switch_force_error(fem, verified)["post_switch_rms_error"]
         assert error < 0.01, (run, error)
         assert error < post_switch_force_error(fem, published)["post_switch_rms_error"], run
+
+
+def test_quick_profile_whole_path(quick_workflow):
+    """Issue 13 through the DAG: the seven whole-path runs (IFENN from the first increment, no
+    hybrid_active 0 row) compared with their FEM runs (on the quick scene all four targets are met:
+    peaks within 0.1 %), the pre-nucleation replay, and the whole-run benchmark with a row per run
+    and method; the speed-accuracy table has the whole-path points."""
+    results = quick_workflow / "results"
+    table = pd.read_csv(results / "tables" / "whole_path.csv").set_index("run")
+    assert set(table.index) == {f"{run}-whole" for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt")}
+    assert (table.hybrid_increments == table.increments_fem).all() and (table.peak_force_rel_error.abs() < 0.001).all()
+    assert table.meets_all.all()
+    network = pd.read_csv(results / "tables" / "pre_nucleation.csv")
+    assert (network.stage == "pre_nucleation").sum() >= 3 and (network.network_residual_max >= network.network_max_abs_error).all()
+    speed = pd.read_csv(results / "benchmarks" / "whole_run_speed.csv")
+    assert len(speed) == 6 and set(speed.method) == {"fem", "ifenn"} and (speed.t_phase_field_total_s > 0).all()
+    assert (results / "figures" / "whole_run_speed.png").stat().st_size > 10_000
+    assert (results / "figures" / "whole_path.png").stat().st_size > 10_000
+    points = pd.read_csv(results / "tables" / "speed_accuracy.csv")
+    assert points.variant.str.endswith("whole path").sum() == 4

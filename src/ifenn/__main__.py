@@ -1,7 +1,7 @@
 """Command line (run under ``mpirun -n N`` for N ranks):
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
-  python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf --fem-dir FEM_RUN_DIR [--model MODEL.pt] --out DIR
+  python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] --out DIR
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
 """
 
@@ -24,7 +24,7 @@ def main(argv=None) -> int:
     hybrid = sub.add_parser("ifenn", help="continue a FEM run from its switch-over increment with IFENN")
     hybrid.add_argument("--spec", required=True, help="resolved IFENN run spec (JSON, from config.ifenn_run_spec)")
     hybrid.add_argument("--mesh", required=True)
-    hybrid.add_argument("--fem-dir", required=True, help="output directory of the FEM run it continues")
+    hybrid.add_argument("--fem-dir", default=None, help="output directory of the FEM run it continues (not read with switch_over 'start')")
     hybrid.add_argument("--model", default=None, help="trained PICNN (needed when the predictor is 'picnn')")
     hybrid.add_argument("--out", required=True)
     hybrid.add_argument("--no-progress", action="store_true")
@@ -48,6 +48,8 @@ def main(argv=None) -> int:
 
         with open(args.spec) as stream:
             spec = json.load(stream)
+        if args.fem_dir is None and spec.get("switch_over", "phi_threshold") != "start":
+            parser.error(f"run {spec['name']} switches over from a FEM run ({spec.get('switch_over', 'phi_threshold')}): --fem-dir is needed")
         run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
     elif args.command == "cell":
         from .stability import run_cell

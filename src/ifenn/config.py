@@ -226,6 +226,7 @@ def _semantic_problems(config: dict) -> list[str]:
         bad = [s for s in [sweep["step"], *sweep["steps"]] if not 1 <= sweep["u_end"] / s <= 100000]
         if bad:
             problems.append(f"config key 'stability.steps': steps {bad} give outside 1..100000 increments to u_end = {sweep['u_end']}")
+    problems += _switch_over_problems(config)
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:
             problems.append(
@@ -243,6 +244,58 @@ def _semantic_problems(config: dict) -> list[str]:
         if verification.get("enabled") and padding not in ("replicate", "zeros"):
             problems.append(f"config key 'ifenn_runs.{name}.pixel_padding': the verified step's pixel equation needs "
                             f"'replicate' or 'zeros', got '{padding}'")
+    return problems
+
+
+SWITCH_OVER = ("phi_threshold", "increment", "start")
+
+
+def switch_over(config: dict, run: str) -> tuple[str, int | None]:
+    """(criterion, switch increment) of an IFENN run: its entry's ``switch_over`` /
+    ``switch_increment``, else the 'ifenn' section's (criteria in SWITCH_OVER)."""
+    entry = config["ifenn_runs"][run]
+    return (entry.get("switch_over", config["ifenn"].get("switch_over", "phi_threshold")),
+            entry.get("switch_increment", config["ifenn"].get("switch_increment")))
+
+
+def _switch_over_problems(config: dict) -> list[str]:
+    """The switch-over criterion of every IFENN run, and the runs that name whole-path runs."""
+    problems = []
+    runs = config.get("ifenn_runs", {})
+    for name, entry in runs.items():
+        criterion, increment = switch_over(config, name)
+        key = f"ifenn_runs.{name}" if "switch_over" in entry else "ifenn"
+        ikey = f"ifenn_runs.{name}.switch_increment" if {"switch_increment", "switch_over"} & set(entry) else "ifenn.switch_increment"
+        if criterion not in SWITCH_OVER:  # the schema refuses it already; kept for configs built in code
+            problems.append(f"config key '{key}.switch_over': '{criterion}' is not a criterion; allowed: {list(SWITCH_OVER)}")
+        elif criterion == "increment":
+            fem = config["fem_runs"].get(entry["fem_run"])
+            n_inc = schedule_increments(config["schedules"].get(fem["schedule"], [])) if fem else None
+            if increment is None:
+                problems.append(f"config key '{ikey}': switch_over 'increment' (run '{name}') needs the FEM increment to switch "
+                                f"after, got null; allowed: 1..{n_inc - 1 if n_inc else 'the last increment - 1'}")
+            elif n_inc is not None and not 1 <= increment < n_inc:
+                problems.append(f"config key '{ikey}': {increment} is outside the {n_inc} increments of run '{entry['fem_run']}' "
+                                f"(allowed 1..{n_inc - 1}: IFENN computes the increments after it)")
+        elif increment is not None and "switch_increment" in entry:
+            problems.append(f"config key '{ikey}': {increment} is read only with switch_over 'increment', but run '{name}' "
+                            f"switches by '{criterion}'; set switch_over: increment or remove it")
+    if config["ifenn"].get("switch_increment") is not None and config["ifenn"].get("switch_over", "phi_threshold") != "increment":
+        problems.append(f"config key 'ifenn.switch_increment': {config['ifenn']['switch_increment']} is read only with "
+                        f"switch_over 'increment', got '{config['ifenn'].get('switch_over')}'")
+    for section in ("whole_path", "whole_run_benchmark"):
+        for k, run in enumerate(config.get(section, {}).get("runs", [])):
+            if run not in runs:
+                problems.append(f"config key '{section}.runs[{k}]': '{run}' is not an IFENN run; allowed: {sorted(runs)}")
+            elif switch_over(config, run)[0] != "start":
+                problems.append(f"config key '{section}.runs[{k}]': '{run}' switches by '{switch_over(config, run)[0]}'; "
+                                "a whole-path run needs switch_over 'start'")
+    for k, run in enumerate(config.get("whole_path", {}).get("network_runs", [])):
+        if run not in config["whole_path"]["runs"]:
+            problems.append(f"config key 'whole_path.network_runs[{k}]': '{run}' is not in whole_path.runs; "
+                            f"allowed: {config['whole_path']['runs']}")
+        elif runs[run].get("predictor", config["ifenn"]["predictor"]) != "picnn":
+            problems.append(f"config key 'whole_path.network_runs[{k}]': '{run}' does not use the PICNN")
     return problems
 
 
@@ -283,6 +336,11 @@ def fem_run_spec(config: dict, run: str) -> dict:
     views = config.get("figures", {}).get("views_3d")
     if views and config.get("ifenn_runs", {}).get(views["run"], {}).get("fem_run") == run:
         save.add(views["increment"])
+    # the state an IFENN run switches over from at a given increment (issue 13)
+    for name, other in config.get("ifenn_runs", {}).items():
+        criterion, increment = switch_over(config, name)
+        if other["fem_run"] == run and criterion == "increment" and increment is not None:
+            save.add(increment)
     # fixed schedules: every load value (and the saved increments) in the spec; adaptive
     # ones: the controller's settings, and fields saved every save_every increments
     loads = {"load": load_values(schedule)} if n_inc is not None else {"adaptive": schedule["adaptive"], "save_every": solver["save_every"]}
@@ -309,7 +367,9 @@ IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "s
 
 def ifenn_run_spec(config: dict, run: str) -> dict:
     """An IFENN run: the spec of its FEM run (scene, schedule, solvers, switch threshold)
-    plus the hybrid options (config 'ifenn', overridden per run)."""
+    plus the hybrid options (config 'ifenn', overridden per run). The switch-over criterion
+    (``switch_over``, ``switch_increment``) is in the spec only when it is not the paper's
+    phi threshold."""
     if run not in config.get("ifenn_runs", {}):
         raise ConfigError(f"unknown IFENN run '{run}'; allowed: {sorted(config.get('ifenn_runs', {}))}")
     entry = config["ifenn_runs"][run]
@@ -325,6 +385,11 @@ def ifenn_run_spec(config: dict, run: str) -> dict:
         spec["verification"] = verification
     for key in ("stagger_max_iterations", "stagger_tolerance"):
         spec[key] = entry.get(key, spec[key])
+    criterion, increment = switch_over(config, run)
+    if criterion != "phi_threshold":  # in the spec only when not the paper's (the published runs' specs stay as they were)
+        spec["switch_over"] = criterion
+        if criterion == "increment":
+            spec["switch_increment"] = increment
     return spec
 
 

@@ -1,6 +1,20 @@
 """IFENN runs: plain FEM up to the switch-over increment (taken from the FEM reference run,
 never recomputed), then the same staggered loop with a pixel-based phase-field step.
 
+When IFENN takes over is the run's ``switch_over`` criterion (config 'ifenn.switch_over',
+:data:`ifenn.config.SWITCH_OVER`):
+
+- ``phi_threshold`` (the paper, the default): after the first FEM increment whose max nodal phi
+  exceeds ``switch_phi_max``. A scene with a history notch (Borden et al.'s initial H, about
+  B Gc / (2 lc) on the notch line) has phi near 1 at the notch from the first increment, so the
+  threshold fires at FEM increment 1 and IFENN computes every later increment; the provenance
+  says so (``switch_over.fired_at_first_increment``).
+- ``increment``: after FEM increment ``switch_increment`` (its state is saved by the FEM run).
+- ``start``: from the scene's initial state (u = 0, phi = 0, H = the initial history); IFENN
+  computes every increment and needs no FEM state (the whole-path runs, issue 13).
+
+provenance.json of an IFENN run states which criterion fired and when (``switch_over``).
+
 history.csv of an IFENN run = the FEM columns + t_inference_s + hybrid_active (0 for the
 increments copied from the FEM run, 1 for the hybrid ones).
 """
@@ -16,20 +30,48 @@ from mpi4py import MPI
 PREDICTORS = ("picnn", "exact_pixel")
 
 
-def switch_state(fem_dir: str | Path) -> tuple[int, dict | None, list[dict]]:
-    """(switch increment, state at its end, FEM history rows 1..switch) of a FEM run; the
-    increment is -1 (and the state None) if the FEM run never reached the threshold."""
+def switch_state(fem_dir: str | Path, increment: int | None = None) -> tuple[int, dict | None, list[dict]]:
+    """(switch increment, state at its end, FEM history rows 1..switch) of a FEM run. Without
+    ``increment`` the switch is the FEM run's phi-threshold increment (-1, the state None and
+    all rows if the FEM run never reached the threshold); with it, that increment, whose state
+    the FEM run must have saved."""
     fem_dir = Path(fem_dir)
     with h5py.File(fem_dir / "fields.h5", "r") as h5:
-        switch = int(h5.attrs["switch_increment"])
+        switch = int(h5.attrs["switch_increment"]) if increment is None else int(increment)
         state = None
         if switch > 0:
-            group = h5[f"increment_{switch:06d}"]
+            name = f"increment_{switch:06d}"
+            if name not in h5:
+                saved = sorted(int(g.split("_")[1]) for g in h5)
+                raise KeyError(f"FEM run {fem_dir} did not save increment {switch} (saved: {saved}): "
+                               "nothing to switch over from")
+            group = h5[name]
             state = {key: group[key][()] for key in ("displacement", "phase_field", "history", "phase_field_gp")}
             state["phase_field"] = state["phase_field"][:, None]
     history = pd.read_csv(fem_dir / "history.csv")
     rows = history[history.increment <= max(switch, 0)].to_dict("records") if switch > 0 else history.to_dict("records")
     return switch, state, rows
+
+
+def switch_record(spec: dict, switch: int, rows: list[dict]) -> dict:
+    """What provenance.json says about the switch-over: the criterion, the last FEM increment
+    (0: none, IFENN from the initial state), the first IFENN increment, u and phi_max there, and
+    whether it fired at the first increment (with the reason where it is the history notch)."""
+    criterion = spec.get("switch_over", "phi_threshold")
+    last = rows[-1] if rows and switch > 0 else None
+    record = {"criterion": criterion, "fem_increments": max(switch, 0), "first_ifenn_increment": max(switch, 0) + 1,
+              "u_switch": float(last["u"]) if last else 0.0, "phi_max_at_switch": float(last["phi_max"]) if last else 0.0,
+              "fired_at_first_increment": switch <= 1}
+    if criterion == "phi_threshold":
+        record["switch_phi_max"] = spec["switch_phi_max"]
+        if switch == 1 and any(n["kind"] == "history" for n in spec["scene"].get("notches", [])):
+            record["note"] = ("the scene's history notch holds phi near 1 at the notch from the first increment, so the "
+                              "phi threshold fired at FEM increment 1: IFENN computes every later increment")
+    elif criterion == "increment":
+        record["switch_increment"] = spec["switch_increment"]
+    else:
+        record["note"] = "IFENN from the scene's initial state: every increment computed by IFENN, no FEM state used"
+    return record
 
 
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
@@ -79,23 +121,32 @@ def _network_inference(spec: dict, model_path, h_px: float, shape):
 
 
 def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True) -> list[dict]:
-    """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN."""
+    """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN (by the
+    spec's ``switch_over`` criterion, module doc); with ``switch_over: start`` from the scene's
+    initial state, and ``fem_dir`` is not read (it may be None)."""
     from .mesh import read_dolfinx_mesh
     from .phase_field_steps import PixelPhaseField
     from .problem import FractureProblem
     from .solver import StaggeredRun
 
     comm = MPI.COMM_WORLD
-    switch, state, rows = switch_state(fem_dir) if comm.rank == 0 else (None, None, None)
-    switch = comm.bcast(switch, root=0)
-    if switch <= 0:
-        raise RuntimeError(f"FEM run {fem_dir} never reached phi_max > {spec['switch_phi_max']}: nothing for IFENN to take over")
+    criterion = spec.get("switch_over", "phi_threshold")
+    if criterion == "start":
+        switch, state, rows = 0, None, []
+    else:
+        increment = spec["switch_increment"] if criterion == "increment" else None
+        switch, state, rows = switch_state(fem_dir, increment) if comm.rank == 0 else (None, None, None)
+        switch = comm.bcast(switch, root=0)
+        if switch <= 0:
+            raise RuntimeError(f"FEM run {fem_dir} never reached phi_max > {spec['switch_phi_max']}: nothing for IFENN to take over")
+    record = comm.bcast(switch_record(spec, switch, rows) if comm.rank == 0 else None, root=0)
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
     inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
     verified = bool((spec.get("verification") or {}).get("enabled"))
     step = PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
                            spec["irreversible"], verified)
-    start = {"increment": switch, "state": state, "rows": rows}
-    run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1})
+    start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
+    run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
+                       provenance_extra={"switch_over": record})
     return run.run()

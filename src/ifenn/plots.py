@@ -361,7 +361,8 @@ def stability_map_figure(table, path) -> None:
 
 def speed_accuracy_figure(table, path, benchmark=None) -> None:
     """Per scene (rows): force-curve error against wall time of the whole run (left) and of
-    the propagation stage (right), log-log, FEM circles and IFENN squares, the Pareto front
+    the propagation stage (right), log-log, FEM circles, IFENN squares (whole-path IFENN
+    diamonds), the Pareto front
     of each panel as a line; the reference run is drawn at the bottom edge. ``benchmark``
     (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
     scenes = list(dict.fromkeys(table.scene))
@@ -375,7 +376,8 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
             for _, r in rows.iterrows():
                 error = floor if r.is_reference else r.force_l2_rel_error
                 colour = colours[r.schedule]
-                ax.scatter(r[column], 100 * error, marker="o" if r.method == "fem" else "s", s=60,
+                marker = "o" if r.method == "fem" else ("D" if r.variant.endswith("whole path") else "s")
+                ax.scatter(r[column], 100 * error, marker=marker, s=60,
                            facecolor="white" if r.converged else colour,
                            edgecolor="k" if r[f"pareto_{column}"] else colour, linewidth=1.8, zorder=3)
                 ax.annotate(r.run + (" (reference)" if r.is_reference else ""), (r[column], 100 * error), fontsize=6,
@@ -390,6 +392,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
             ax.grid(True, which="both", alpha=0.3)
         handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
                    plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
+                   plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path (from the first increment)"),
                    plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
                    plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
@@ -452,5 +455,84 @@ def error_sources_figure(sources, path) -> None:
     fig.suptitle("Where IFENN's post-switch error comes from, replayed on the same FEM states: pixel equation, H cap, "
                  "network, smoothing,\nirreversibility (together: the published step) and single-pass staggering",
                  fontsize=10)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def whole_path_figure(pairs: dict, table, path) -> None:
+    """IFENN over the whole load path against FEM (issue 13). Per run (columns): the force curves
+    of FEM and the whole-path run with FEM's peak and phi-threshold increment marked (top), and the
+    verified step's work per increment (whole-image CG iterations, and the share of the image
+    corrected) against u (bottom). ``pairs``: run -> (FEM history, IFENN history) DataFrames;
+    ``table``: ifenn.whole_path.whole_path_table (the numbers in the titles)."""
+    runs = list(pairs)
+    fig, axes = plt.subplots(2, len(runs), figsize=(3.6 * len(runs) + 0.6, 6.4), squeeze=False, sharex="col")
+    rows = table.set_index("run")
+    for k, run in enumerate(runs):
+        fem, ifenn = pairs[run]
+        top, bottom = axes[0, k], axes[1, k]
+        top.plot(fem.u, fem.reaction_force.abs(), color="k", lw=1.2, label="FEM")
+        top.plot(ifenn.u, ifenn.reaction_force.abs(), color="tab:red", lw=1.0, ls="--", label="IFENN, whole path")
+        r = rows.loc[run]
+        top.axvline(r.u_peak_fem, color="0.6", lw=0.6)
+        if np.isfinite(r.u_fem_switch):
+            top.axvline(r.u_fem_switch, color="tab:blue", lw=0.6, ls=":", label="FEM phi_max > threshold")
+        top.set_title(f"{run}\npeak {100 * r.peak_force_rel_error:+.2f} %, u_peak {100 * r.u_peak_rel_error:+.1f} %,\n"
+                      f"post-peak RMS {100 * r.post_peak_rms_error:.2f} %, final {100 * r.final_force_fraction_ifenn:.1f} "
+                      f"({100 * r.final_force_fraction_fem:.1f}) %", fontsize=7)
+        top.set_ylabel("reaction force (N/mm)" if k == 0 else "")
+        if "verify_solve_work" in ifenn:
+            bottom.plot(ifenn.u, ifenn.verify_solve_work, color="tab:red", lw=1.0, label="correction, whole-image CG its")
+            twin = bottom.twinx()
+            twin.plot(ifenn.u, ifenn.verify_corrected_fraction, color="tab:green", lw=0.8, label="share corrected")
+            twin.set_ylim(0, 1.05)
+            if k == len(runs) - 1:
+                twin.set_ylabel("share of the image corrected", color="tab:green")
+        bottom.set_xlabel("u (mm)")
+        bottom.set_ylabel("whole-image CG iterations" if k == 0 else "")
+        bottom.set_yscale("symlog", linthresh=1.0)
+        bottom.set_ylim(bottom=0)
+        if k == 0:
+            top.legend(fontsize=6)
+            bottom.legend(fontsize=6, loc="upper left")
+    fig.suptitle("Verified IFENN from the first increment against FEM (same scene, same schedule)", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def whole_run_speed_figure(increments, summary, path) -> None:
+    """The phase-field step over the whole run, FEM against whole-path IFENN, one process and one
+    core (ifenn.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
+    (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked."""
+    runs = list(dict.fromkeys(increments.run))
+    fig, axes = plt.subplots(2, len(runs), figsize=(4.2 * len(runs), 6.4), squeeze=False, sharex="col")
+    colours = {"fem": "k", "ifenn": "tab:red"}
+    labels = {"fem": "FEM (Q1 solve)", "ifenn": "IFENN, whole path (verified)"}
+    rows = summary.set_index(["run", "method"])
+    for k, run in enumerate(runs):
+        for method in ("fem", "ifenn"):
+            frame = increments[(increments.run == run) & (increments.method == method)]
+            if frame.empty:
+                continue
+            axes[0, k].plot(frame.u, frame.t_phase_field_s, color=colours[method], lw=0.6, alpha=0.8, label=labels[method])
+            axes[1, k].plot(frame.u, frame.t_phase_field_s.cumsum(), color=colours[method], lw=1.2, label=labels[method])
+        fem = increments[(increments.run == run) & (increments.method == "fem")]
+        switch = int(rows.loc[(run, "fem")].fem_switch_increment)
+        if switch <= len(fem):
+            u_switch = float(fem.u[fem.increment == switch].iloc[0])
+            for ax in axes[:, k]:
+                ax.axvline(u_switch, color="tab:blue", lw=0.6, ls=":")
+        speedup = rows.loc[(run, "ifenn")].phase_field_speedup_vs_fem
+        axes[0, k].set_title(f"{run} ({rows.loc[(run, 'fem')].elements} elements)\n"
+                             f"FEM / IFENN phase-field time over the run: {speedup:.2f}x", fontsize=8)
+        axes[0, k].set_yscale("log")
+        axes[0, k].set_ylabel("phase-field step (s)" if k == 0 else "")
+        axes[1, k].set_ylabel("cumulative phase-field time (s)" if k == 0 else "")
+        axes[1, k].set_xlabel("u (mm)")
+        axes[0, k].grid(True, which="both", alpha=0.3)
+        axes[1, k].grid(True, alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Phase-field step over the whole run, same core, same process, increments interleaved "
+                 "(dotted: FEM's phi_max > switch threshold)", fontsize=9)
     fig.tight_layout()
     _save(fig, path)

@@ -188,12 +188,14 @@ class StaggeredRun:
     """One run: a problem, a phase-field step, a load list and an output directory."""
 
     def __init__(self, problem, phase_field_step, spec: dict, out_dir: str | Path, progress: bool = True,
-                 start: dict | None = None, row_constants: dict | None = None):
+                 start: dict | None = None, row_constants: dict | None = None, provenance_extra: dict | None = None):
         """``start``: optional {'increment': k, 'state': state dict (rank 0), 'rows': rows 1..k}
         to continue another run's state (a hybrid run from the FEM switch-over increment).
-        ``row_constants``: columns with a fixed value on every computed row."""
+        ``row_constants``: columns with a fixed value on every computed row.
+        ``provenance_extra``: more entries of provenance.json (a hybrid run's switch-over)."""
         self.problem, self.step, self.spec = problem, phase_field_step, spec
         self.start, self.row_constants = start, dict(row_constants or {})
+        self.provenance_extra = dict(provenance_extra or {})
         self.loads = load_control(spec)
         adaptive_columns = ["rejected_steps", "rejected_iterations"] if self.loads.adaptive else []
         self.columns = HISTORY_COLUMNS + adaptive_columns + list(phase_field_step.extra_columns) + list(self.row_constants)
@@ -382,7 +384,7 @@ class StaggeredRun:
             write_csv(self.out_dir / "history.csv", pd.DataFrame(self.rows, columns=self.columns))
             write_json(self.out_dir / "provenance.json", provenance(
                 self.hash, wall_s, run=self.spec["name"], mpi_ranks=self.comm.size,
-                phase_field_step=self.step.name, increments=len(self.rows)))
+                phase_field_step=self.step.name, increments=len(self.rows), **self.provenance_extra))
             for path in self.work_dir.glob("*"):
                 path.unlink()
             self.work_dir.rmdir()

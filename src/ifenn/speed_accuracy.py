@@ -6,7 +6,9 @@ Reference: a FEM run named in the config (the finest schedule with converged sta
 range (metrics.force_curve_error). Wall time: the sum of the per-increment times recorded in
 history.csv (an IFENN run's history holds the FEM increments it continued, so its whole-run
 time includes the FEM stage before the switch-over); propagation stage = the increments after
-the switch-over (the first increment with phi_max > switch_phi_max). Wall times depend on the
+the switch-over (the first increment with phi_max > switch_phi_max; for a whole-path IFENN run,
+which computes every increment (its variant ends in 'whole path'), the first of its own increments with
+phi_max > switch_phi_max, as for a FEM run). Wall times depend on the
 load of the machine while each run was made; 'displacement_solves' is the load-independent
 cost (each staggered iteration is one displacement solve and one phase-field step).
 """
@@ -18,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .config import switch_over
 from .metrics import force_curve_error
 
 
@@ -36,6 +39,8 @@ def _label(config: dict, method: str, run: str) -> str:
     verification = {**config["ifenn"].get("verification", {}), **entry.get("verification", {})}
     if verification.get("enabled"):
         what = "verified, no network" if verification.get("warm_start") == "previous" else f"verified {what}"
+    if switch_over(config, run)[0] == "start":
+        what += ", whole path"
     return f"IFENN {fem['schedule']}, {stagger}, {what}"
 
 
@@ -59,7 +64,8 @@ def speed_accuracy_table(config: dict, results: str | Path = "results") -> pd.Da
                 history = pd.read_csv(results / method / run / "history.csv")
                 switch = history.increment[history.phi_max > config["ifenn"]["switch_phi_max"]]
                 switch = int(switch.iloc[0]) if len(switch) else int(history.increment.iloc[-1])
-                if method == "ifenn" and (history.hybrid_active == 1).any():
+                whole = method == "ifenn" and switch_over(config, run)[0] == "start"
+                if method == "ifenn" and not whole and (history.hybrid_active == 1).any():
                     switch = int(history.increment[history.hybrid_active == 1].min()) - 1
                 fem_run = run if method == "fem" else config["ifenn_runs"][run]["fem_run"]
                 fem_entry = config["fem_runs"][fem_run]

@@ -5,7 +5,7 @@ import sys
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn import stability as _stability
-from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, training_spec, validate_config
+from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, switch_over, training_spec, validate_config
 from ifenn.metrics import process_zone_pairs
 
 try:
@@ -41,14 +41,16 @@ def fem_launcher(wildcards):
 
 
 def ifenn_inputs(wildcards):
+    """An IFENN run's spec, mesh, network and, unless it starts from the initial state
+    (switch_over 'start'), the FEM run it continues."""
     entry = config["ifenn_runs"][wildcards.run]
     fem_run = entry["fem_run"]
     inputs = {
         "spec": f"results/ifenn/{wildcards.run}/spec.json",
         "mesh": f"results/mesh/{config['fem_runs'][fem_run]['scene']}.xdmf",
-        "fem_fields": f"results/fem/{fem_run}/fields.h5",
-        "fem_history": f"results/fem/{fem_run}/history.csv",
     }
+    if switch_over(config, wildcards.run)[0] != "start":
+        inputs.update(fem_fields=f"results/fem/{fem_run}/fields.h5", fem_history=f"results/fem/{fem_run}/history.csv")
     if entry.get("predictor", config["ifenn"]["predictor"]) == "picnn":
         inputs["model"] = "results/picnn/model.pt"
     return inputs
@@ -115,4 +117,20 @@ def error_sources_inputs(wildcards):
     for case in error_sources_cases(wildcards):
         paths |= {case["spec"], case["mesh"], case["ifenn_history"], case["model"],
                   f"{case['fem_dir']}/fields.h5", f"{case['fem_dir']}/history.csv"}
+    return sorted(paths)
+
+
+def whole_path_runs():
+    """Whole-path IFENN run -> the FEM run of the same scene and schedule (config 'whole_path')."""
+    return {run: config["ifenn_runs"][run]["fem_run"] for run in config["whole_path"]["runs"]}
+
+
+def whole_path_inputs(wildcards):
+    """FEM and whole-path histories; for the network replay the spec, the FEM fields and the network."""
+    setup = config["whole_path"]
+    paths = {f"results/fem/{fem}/history.csv" for fem in whole_path_runs().values()}
+    paths |= {f"results/ifenn/{run}/history.csv" for run in setup["runs"]}
+    for run in setup.get("network_runs", []):
+        paths |= {f"results/ifenn/{run}/spec.json", f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",
+                  "results/picnn/model.pt"}
     return sorted(paths)

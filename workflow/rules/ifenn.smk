@@ -1,5 +1,6 @@
 # IFENN runs: each continues a FEM run from its switch-over increment with the PICNN (or the
-# exact pixel solver), then is compared with it.
+# exact pixel solver), then is compared with it; whole-path runs (switch_over 'start') compute
+# every increment themselves and need no FEM state.
 
 
 rule ifenn_spec:
@@ -27,7 +28,9 @@ rule ifenn:
     params:
         python=PYTHON,
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
-        fem_dir=lambda w, input: os.path.dirname(input.fem_history),
+        # a whole-path run (switch_over 'start') gets its FEM run's folder too, and does not read it
+        fem_dir=lambda w, input: (os.path.dirname(input.fem_history) if "fem_history" in input.keys()
+                                  else f"results/fem/{config['ifenn_runs'][w.run]['fem_run']}"),
         out=lambda w, output: os.path.dirname(output.history),
     threads: 1
     resources:

@@ -1,0 +1,111 @@
+"""The phase-field step over the whole run (issue 13): FEM against whole-path IFENN (the verified
+step from the first increment), on the same core in the same process.
+
+For each whole-path run (config 'whole_run_benchmark.runs', ``switch_over: start``) two runs
+of the same scene and schedule are set up from the initial state: FEM (the Q1 phase-field
+solve) and the run's IFENN step. Their increments are interleaved (FEM then IFENN on odd
+increments, IFENN then FEM on even ones), so both see the same machine load over the run;
+only the phase-field step differs in what they compute. ``t_phase_field_s`` is everything
+the step does (FEM: assembly, solve, evaluation at the Gauss points; IFENN: Gauss points ->
+pixels, cap, network, check and correction, pixels -> Gauss points). Fixed schedules only.
+"""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+#: columns of the per-increment table (those a method lacks are NaN)
+INCREMENT_COLUMNS = ["increment", "u", "reaction_force", "phi_max", "t_displacement_s", "t_phase_field_s", "t_increment_s",
+                     "t_inference_s", "t_verify_s", "verify_corrected_fraction", "verify_solve_work"]
+
+
+def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
+    """The FEM run and the whole-path IFENN run of ``spec``, each a StaggeredRun at its initial state."""
+    from .hybrid import make_inference
+    from .mesh import read_dolfinx_mesh
+    from .phase_field_steps import FEMPhaseField, PixelPhaseField
+    from .problem import FractureProblem
+    from .solver import StaggeredRun
+
+    runs = {}
+    for method in ("fem", "ifenn"):
+        domain = read_dolfinx_mesh(mesh_path)
+        problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
+        if method == "fem":
+            step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
+        else:
+            verified = bool((spec.get("verification") or {}).get("enabled"))
+            inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
+            step = PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
+                                   spec["irreversible"], verified)
+        run_spec = {**copy.deepcopy(spec), "name": f"{spec['name']}-{method}", "save_fields": [], "checkpoint_every": 10**9}
+        runs[method] = StaggeredRun(problem, step, run_spec, work / run_spec["name"], progress=False,
+                                    row_constants={"hybrid_active": 1} if method == "ifenn" else None)
+    return runs
+
+
+def whole_run_speed(specs: list[dict], model_path: str | Path, results: str | Path = "results",
+                    increments: int | None = None, progress: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(summary, per-increment table). ``specs``: whole-path IFENN run specs (``switch_over``
+    'start', a fixed schedule); ``increments``: the first increments of each schedule (None: all).
+    Summary, one row per (run, method): increments, total / mean / median phase-field seconds,
+    the totals before FEM's phi-threshold increment (pre-nucleation) and from it on
+    (propagation), displacement and increment totals, the final force, and FEM's phase-field
+    total over the method's (``phase_field_speedup_vs_fem``, > 1 = faster than FEM)."""
+    results = Path(results)
+    summary, per_increment = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for spec in specs:
+            if spec.get("switch_over") != "start" or "load" not in spec:
+                raise ValueError(f"run {spec['name']}: the whole-run benchmark needs switch_over 'start' and a fixed schedule")
+            loads = spec["load"][:increments] if increments else spec["load"]
+            runs = _runs(spec, results / "mesh" / f"{spec['scene_name']}.xdmf", Path(model_path), Path(tmp))
+            bar = None
+            if progress:
+                from tqdm import tqdm
+                bar = tqdm(total=len(loads), desc=f"{spec['name']} (FEM + IFENN)", mininterval=10.0)
+            u_previous = 0.0
+            for k, u in enumerate(loads, start=1):
+                order = ("fem", "ifenn") if k % 2 else ("ifenn", "fem")
+                for method in order:
+                    runs[method].rows.append(runs[method]._increment(k, u, u_previous))
+                u_previous = u
+                if bar is not None:
+                    bar.update(1)
+            if bar is not None:
+                bar.close()
+            histories = {method: pd.DataFrame(run.rows) for method, run in runs.items()}
+            over = histories["fem"].increment[histories["fem"].phi_max > spec["switch_phi_max"]]
+            nucleation = int(over.iloc[0]) if len(over) else len(loads) + 1
+            for method, history in histories.items():
+                frame = history.reindex(columns=INCREMENT_COLUMNS)
+                per_increment.append(frame.assign(run=spec["name"], fem_run=spec["fem_run"], method=method))
+                pre = history.increment < nucleation
+                summary.append({"run": spec["name"], "fem_run": spec["fem_run"], "method": method,
+                                "elements": "x".join(map(str, spec["scene"]["elements"])), "increments": len(history),
+                                "fem_switch_increment": nucleation,
+                                "t_phase_field_total_s": history.t_phase_field_s.sum(),
+                                "t_phase_field_mean_s": history.t_phase_field_s.mean(),
+                                "t_phase_field_median_s": history.t_phase_field_s.median(),
+                                "t_phase_field_pre_nucleation_s": history.t_phase_field_s[pre].sum(),
+                                "t_phase_field_propagation_s": history.t_phase_field_s[~pre].sum(),
+                                "t_displacement_total_s": history.t_displacement_s.sum(),
+                                "t_increment_total_s": history.t_increment_s.sum(),
+                                "verify_solve_work_mean": history.verify_solve_work.mean() if "verify_solve_work" in history else np.nan,
+                                "final_force": history.reaction_force.iloc[-1],
+                                "peak_force": history.reaction_force.abs().max()})
+    table = pd.DataFrame(summary)
+    fem = table[table.method == "fem"].set_index("run")
+    for column, name in (("t_phase_field_total_s", "phase_field_speedup_vs_fem"),
+                         ("t_phase_field_pre_nucleation_s", "pre_nucleation_speedup_vs_fem"),
+                         ("t_phase_field_propagation_s", "propagation_speedup_vs_fem"),
+                         ("t_increment_total_s", "increment_speedup_vs_fem")):
+        table[name] = table.run.map(fem[column]) / table[column]
+    increments_table = pd.concat(per_increment, ignore_index=True)
+    lead = ["run", "fem_run", "method"]
+    return table, increments_table[lead + [c for c in increments_table.columns if c not in lead]]

@@ -1,0 +1,116 @@
+"""IFENN over the whole load path (issue 13) and the switch-over criterion: on the quick scene,
+verified IFENN from the first increment reaches FEM's peak within a stated tolerance, and every
+IFENN run's provenance says which criterion fired and at which increment."""
+
+import copy
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ifenn.config import IFENN_OPTIONS, fem_run_spec, ifenn_run_spec
+from ifenn.hybrid import run_ifenn
+from ifenn.mesh import build_mesh, write_mesh
+from ifenn.solver import run_fem
+from ifenn.whole_path import whole_path_comparison
+
+#: whole-path verified IFENN against FEM on the quick snt1-II: peak force (measured 0.04 % with the
+#: quick network, 0.04 % with an untrained one: the check certifies the same pixel solution), u at
+#: the peak (the same increment), post-peak RMS (measured 0.55 %)
+PEAK_TOLERANCE, U_PEAK_TOLERANCE, POST_PEAK_RMS_TOLERANCE = 0.005, 0.02, 0.02
+
+
+@pytest.fixture(scope="module")
+def fem_run(quick_config, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("whole")
+    spec = fem_run_spec(quick_config, "snt1-II")
+    write_mesh(build_mesh(spec["scene"]), tmp / "mesh.xdmf")
+    history = pd.DataFrame(run_fem(spec, tmp / "mesh.xdmf", tmp / "fem", progress=False))
+    return spec, tmp, history
+
+
+def _random_model(spec, path):
+    """An untrained PICNN: the verified step has to correct all of its prediction."""
+    import torch
+
+    from ifenn.picnn import PICNN, InputScaling, save_picnn
+
+    torch.manual_seed(0)
+    net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    h_px = (spec["scene"]["domain"]["x"][1] - spec["scene"]["domain"]["x"][0]) / spec["scene"]["elements"][0] / 2
+    save_picnn(net, path, h_px, spec["material"]["Gc"], spec["material"]["lc"], "test")
+    return path
+
+
+def _provenance(folder):
+    return json.loads((folder / "provenance.json").read_text())["switch_over"]
+
+
+def test_whole_path_verified_ifenn_reaches_fem_peak(fem_run, quick_config, tmp_path):
+    """snt1-II-whole of the quick config (the verified step from the first increment, no FEM
+    state read: fem_dir None): peak within PEAK_TOLERANCE of FEM's, u at the peak within
+    U_PEAK_TOLERANCE, post-peak force RMS within POST_PEAK_RMS_TOLERANCE of FEM's peak, every
+    increment certified; provenance: criterion 'start', no FEM increment."""
+    _, tmp, fem = fem_run
+    spec = ifenn_run_spec(quick_config, "snt1-II-whole")
+    model = _random_model(spec, tmp_path / "random.pt")
+    whole = pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", None, model, tmp_path / "whole", progress=False))
+    assert len(whole) == len(fem) and (whole.hybrid_active == 1).all() and (whole.t_inference_s > 0).all()
+    np.testing.assert_allclose(whole.u, fem.u)
+    assert (whole.verify_residual_after <= spec["verification"]["tolerance"]).all()
+    row = whole_path_comparison(fem, whole, spec["switch_phi_max"])
+    assert abs(row["peak_force_rel_error"]) <= PEAK_TOLERANCE, row
+    assert abs(row["u_peak_rel_error"]) <= U_PEAK_TOLERANCE, row
+    assert row["post_peak_rms_error"] <= POST_PEAK_RMS_TOLERANCE, row
+    assert row["pre_nucleation_increments"] > 0 and row["pre_nucleation_verify_corrected_fraction_mean"] > 0
+    record = _provenance(tmp_path / "whole")
+    assert record["criterion"] == "start" and record["fem_increments"] == 0 and record["first_ifenn_increment"] == 1
+
+
+def _exact_spec(fem_spec, quick_config, name, **options):
+    spec = copy.deepcopy(fem_spec)
+    spec.update({k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, name=name, fem_run="snt1-II", predictor="exact_pixel",
+                smoothing_sigma=None, pixel_padding="replicate", **options)
+    return spec
+
+
+def test_switch_at_a_given_increment_and_at_the_phi_threshold(fem_run, quick_config, tmp_path):
+    """switch_over 'increment' continues the FEM state saved there (rows 1..k copied); the paper's
+    threshold continues FEM's first increment with phi_max > switch_phi_max; an increment the FEM run
+    did not save is refused, naming what it saved. Both say so in provenance.json."""
+    fem_spec, tmp, fem = fem_run
+    spec = _exact_spec(fem_spec, quick_config, "at-10", switch_over="increment", switch_increment=10)
+    at_10 = pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", tmp / "fem", None, tmp_path / "at-10", progress=False))
+    assert list(at_10.hybrid_active) == [0] * 10 + [1] * (len(fem) - 10)
+    pd.testing.assert_frame_equal(at_10.iloc[:10][fem.columns], fem.iloc[:10], check_dtype=False)
+    record = _provenance(tmp_path / "at-10")
+    assert record["criterion"] == "increment" and record["fem_increments"] == 10 and record["first_ifenn_increment"] == 11
+    assert record["u_switch"] == pytest.approx(fem.u.iloc[9])
+    threshold = pd.DataFrame(run_ifenn(_exact_spec(fem_spec, quick_config, "threshold"), tmp / "mesh.xdmf", tmp / "fem", None,
+                                       tmp_path / "threshold", progress=False))
+    switch = int(fem.increment[fem.phi_max > fem_spec["switch_phi_max"]].iloc[0])
+    record = _provenance(tmp_path / "threshold")
+    assert record == {**record, "criterion": "phi_threshold", "fem_increments": switch, "switch_phi_max": fem_spec["switch_phi_max"],
+                      "fired_at_first_increment": False}
+    assert record["phi_max_at_switch"] > fem_spec["switch_phi_max"] and int((threshold.hybrid_active == 0).sum()) == switch
+    with pytest.raises(KeyError, match="did not save increment 12"):
+        run_ifenn(_exact_spec(fem_spec, quick_config, "at-12", switch_over="increment", switch_increment=12),
+                  tmp / "mesh.xdmf", tmp / "fem", None, tmp_path / "at-12", progress=False)
+
+
+def test_history_notch_fires_the_threshold_at_the_first_increment(quick_config, tmp_path):
+    """A history notch (Borden's initial H) holds phi near 1 at the notch from the first
+    increment: the paper's threshold switches at FEM increment 1, and the provenance says so."""
+    spec = copy.deepcopy(fem_run_spec(quick_config, "snt1-II"))
+    spec["scene"]["notches"] = [{"kind": "history", "start": [-0.5, 0.0], "end": [-0.2, 0.0]}]
+    spec.update(load=spec["load"][:4], save_fields=[2, 4])
+    write_mesh(build_mesh(spec["scene"]), tmp_path / "mesh.xdmf")
+    fem = pd.DataFrame(run_fem(spec, tmp_path / "mesh.xdmf", tmp_path / "fem", progress=False))
+    assert fem.phi_max.iloc[0] > spec["switch_phi_max"]
+    hybrid = pd.DataFrame(run_ifenn(_exact_spec(spec, quick_config, "notch"), tmp_path / "mesh.xdmf", tmp_path / "fem", None,
+                                    tmp_path / "notch", progress=False))
+    assert list(hybrid.hybrid_active) == [0, 1, 1, 1]
+    record = _provenance(tmp_path / "notch")
+    assert record["criterion"] == "phi_threshold" and record["fem_increments"] == 1 and record["fired_at_first_increment"]
+    assert "history notch" in record["note"]
