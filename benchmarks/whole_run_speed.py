@@ -8,37 +8,18 @@ PICNN of the workflow (results/), no FEM run. Run it alone: the numbers are wall
 
 from __future__ import annotations
 
-import argparse
-import json
-import logging
-from pathlib import Path
-
 import pandas as pd
+from _cli import parser, setup
 
-from ifenn.config import REPO, ifenn_run_spec, load_config
 from ifenn.io import write_csv
 from ifenn.whole_run_benchmark import whole_run_speed
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--config", nargs="+", default=[str(REPO / "config" / "config.yaml")])
-    parser.add_argument("--model", default="results/picnn/model.pt")
-    parser.add_argument("--specs", nargs="+", default=None,
-                        help="whole-path IFENN run specs (results/ifenn/RUN/spec.json); default: whole_run_benchmark.runs of --config")
-    parser.add_argument("--increments", type=int, default=None, help="first increments of each schedule (default: all)")
-    parser.add_argument("--out", default="results/benchmarks/whole_run_speed.csv")
-    parser.add_argument("--out-increments", default="results/benchmarks/whole_run_speed_increments.csv")
-    args = parser.parse_args()
-    logging.basicConfig(level=logging.WARNING)
-    import torch
-
-    torch.set_num_threads(1)
-    if args.specs:
-        specs = [json.loads(Path(path).read_text()) for path in args.specs]
-    else:
-        config = load_config(*args.config)
-        specs = [ifenn_run_spec(config, run) for run in config["whole_run_benchmark"]["runs"]]
+    cli = parser(__doc__, "whole_run_benchmark", "results/benchmarks/whole_run_speed.csv", "first increments of each schedule (default: all)")
+    cli.add_argument("--out-increments", default="results/benchmarks/whole_run_speed_increments.csv")
+    args = cli.parse_args()
+    _, specs = setup(args, "whole_run_benchmark")
     summary, increments = whole_run_speed(specs, args.model, increments=args.increments)
     write_csv(args.out, summary)
     write_csv(args.out_increments, increments)

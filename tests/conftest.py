@@ -35,6 +35,20 @@ def quick_spec(quick_config):
     return make
 
 
+def quick_fem_run(quick_config, tmp_path_factory, run: str, folder: str):
+    """A FEM run of the quick config, meshed and run in a temporary folder: (spec, folder, history)."""
+    import pandas as pd
+
+    from ifenn.mesh import build_mesh, write_mesh
+    from ifenn.solver import run_fem
+
+    tmp = tmp_path_factory.mktemp(folder)
+    spec = fem_run_spec(quick_config, run)
+    write_mesh(build_mesh(spec["scene"]), tmp / "mesh.xdmf")
+    history = pd.DataFrame(run_fem(spec, tmp / "mesh.xdmf", tmp / "fem", progress=False))
+    return spec, tmp, history
+
+
 def build_problem(scene, material, petsc, tmp_path, name="scene"):
     """Mesh ``scene`` through the real path (meshio XDMF -> dolfinx) and set up the problem."""
     from ifenn.mesh import build_mesh, read_dolfinx_mesh, write_mesh

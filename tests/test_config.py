@@ -19,6 +19,16 @@ def test_schedule_values():
     assert values[-1] == pytest.approx(6e-3)
 
 
+def assert_refused(paper_config, mutate, expected):
+    """``mutate`` of the paper config is refused before any compute, the message naming each of ``expected``."""
+    config = copy.deepcopy(paper_config)
+    mutate(config)
+    with pytest.raises(ConfigError) as info:
+        validate_config(config)
+    for text in expected:
+        assert text in str(info.value), str(info.value)
+
+
 @pytest.mark.parametrize(
     "mutate, expected",
     [
@@ -42,12 +52,7 @@ def test_schedule_values():
     ],
 )
 def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):
-    config = copy.deepcopy(paper_config)
-    mutate(config)
-    with pytest.raises(ConfigError) as info:
-        validate_config(config)
-    for text in expected:
-        assert text in str(info.value), str(info.value)
+    assert_refused(paper_config, mutate, expected)
 
 
 def test_defaults_are_filled(paper_config):
@@ -74,12 +79,7 @@ def test_defaults_are_filled(paper_config):
     ],
 )
 def test_bad_switch_over_is_refused_naming_the_key(paper_config, mutate, expected):
-    config = copy.deepcopy(paper_config)
-    mutate(config)
-    with pytest.raises(ConfigError) as info:
-        validate_config(config)
-    for text in expected:
-        assert text in str(info.value), str(info.value)
+    assert_refused(paper_config, mutate, expected)
 
 
 def test_switch_over_in_the_specs(paper_config):

@@ -6,20 +6,15 @@ import copy
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import quick_fem_run
 
-from ifenn.config import IFENN_OPTIONS, fem_run_spec
+from ifenn.config import IFENN_OPTIONS
 from ifenn.hybrid import run_ifenn
-from ifenn.mesh import build_mesh, write_mesh
-from ifenn.solver import run_fem
 
 
 @pytest.fixture(scope="module")
 def fem_run(quick_config, tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("hybrid")
-    spec = fem_run_spec(quick_config, "snt1-I")
-    write_mesh(build_mesh(spec["scene"]), tmp / "mesh.xdmf")
-    history = pd.DataFrame(run_fem(spec, tmp / "mesh.xdmf", tmp / "fem", progress=False))
-    return spec, tmp, history
+    return quick_fem_run(quick_config, tmp_path_factory, "snt1-I", "hybrid")
 
 
 def _ifenn(fem_run, quick_config, name, **options):

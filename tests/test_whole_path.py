@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import quick_fem_run
 
 from ifenn.config import IFENN_OPTIONS, fem_run_spec, ifenn_run_spec
 from ifenn.hybrid import run_ifenn
@@ -23,11 +24,7 @@ PEAK_TOLERANCE, U_PEAK_TOLERANCE, POST_PEAK_RMS_TOLERANCE = 0.005, 0.02, 0.02
 
 @pytest.fixture(scope="module")
 def fem_run(quick_config, tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("whole")
-    spec = fem_run_spec(quick_config, "snt1-II")
-    write_mesh(build_mesh(spec["scene"]), tmp / "mesh.xdmf")
-    history = pd.DataFrame(run_fem(spec, tmp / "mesh.xdmf", tmp / "fem", progress=False))
-    return spec, tmp, history
+    return quick_fem_run(quick_config, tmp_path_factory, "snt1-II", "whole")
 
 
 def _random_model(spec, path):

@@ -1,0 +1,35 @@
+"""What the benchmark scripts share: their common options, one thread, and where their IFENN
+run specs come from (files given with --specs, else the config section's runs)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from ifenn.config import REPO, ifenn_run_spec, load_config
+
+
+def parser(doc: str, section: str, out: str, increments_help: str) -> argparse.ArgumentParser:
+    """--config, --model, --specs (default: ``section``.runs of --config), --increments, --out."""
+    cli = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    cli.add_argument("--config", nargs="+", default=[str(REPO / "config" / "config.yaml")])
+    cli.add_argument("--model", default="results/picnn/model.pt")
+    cli.add_argument("--specs", nargs="+", default=None,
+                     help=f"IFENN run specs (results/ifenn/RUN/spec.json); default: {section}.runs of --config")
+    cli.add_argument("--increments", type=int, default=None, help=increments_help)
+    cli.add_argument("--out", default=out)
+    return cli
+
+
+def setup(args: argparse.Namespace, section: str) -> tuple[dict, list[dict]]:
+    """One thread for torch, warnings only; (the config, the run specs to measure)."""
+    logging.basicConfig(level=logging.WARNING)
+    import torch
+
+    torch.set_num_threads(1)
+    config = load_config(*args.config)
+    if args.specs:
+        return config, [json.loads(Path(path).read_text()) for path in args.specs]
+    return config, [ifenn_run_spec(config, run) for run in config[section]["runs"]]
