@@ -46,12 +46,9 @@ def fem_step(problem, spec, model_path):
 
 
 def ifenn_process_zone_step(problem, spec, model_path):
-    from ifenn.hybrid import make_inference
-    from ifenn.phase_field_steps import PixelPhaseField
+    from ifenn.hybrid import pixel_phase_field
 
-    spec = {**spec, "inference": "process_zone", "predictor": "picnn", "evaluation": "orbit"}
-    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
-    return PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"])
+    return pixel_phase_field({**spec, "inference": "process_zone", "predictor": "picnn", "evaluation": "orbit"}, problem, model_path)
 
 
 #: method -> factory(problem, spec, model path) of its phase-field step. The hook for more

@@ -33,9 +33,9 @@ METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluat
 
 
 def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
-    from .hybrid import make_inference, switch_state
+    from .hybrid import pixel_phase_field, switch_state
     from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import FEMPhaseField, PixelPhaseField
+    from .phase_field_steps import FEMPhaseField
     from .problem import FractureProblem
     from .solver import StaggeredRun
 
@@ -55,10 +55,8 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     if method == "fem":
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
     else:
-        inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
-        kernel = inference.kernel
-        verified = "verification" in spec
-        step = PixelPhaseField(problem, inference, spec["predictor"], spec["history_cap"], spec["irreversible"], verified)
+        step = pixel_phase_field(spec, problem, model_path)
+        kernel = step.inference.kernel
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,
                        row_constants={"hybrid_active": int(method != "fem")})

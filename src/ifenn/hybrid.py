@@ -93,6 +93,17 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
     return _network_inference(spec, model_path, h_px, shape)
 
 
+def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD):
+    """The hybrid phase-field step of ``spec`` on ``problem``: its inference (:func:`make_inference`,
+    on rank 0), checked and corrected by the pixel equation where ``verification.enabled``."""
+    from .phase_field_steps import PixelPhaseField
+
+    verified = bool((spec.get("verification") or {}).get("enabled"))
+    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
+    return PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
+                           spec["irreversible"], verified)
+
+
 def _network_inference(spec: dict, model_path, h_px: float, shape):
     from .process_zone import FullInference, ProcessZoneInference
 
@@ -125,7 +136,6 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     spec's ``switch_over`` criterion, module doc); with ``switch_over: start`` from the scene's
     initial state, and ``fem_dir`` is not read (it may be None)."""
     from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import PixelPhaseField
     from .problem import FractureProblem
     from .solver import StaggeredRun
 
@@ -142,10 +152,7 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     record = comm.bcast(switch_record(spec, switch, rows) if comm.rank == 0 else None, root=0)
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
-    verified = bool((spec.get("verification") or {}).get("enabled"))
-    step = PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
-                           spec["irreversible"], verified)
+    step = pixel_phase_field(spec, problem, model_path, comm)
     start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
     run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
                        provenance_extra={"switch_over": record})

@@ -219,29 +219,6 @@ void ifenn_dilate(const uint8_t* in, uint8_t* out, uint8_t* tmp, int h, int w, i
     }
 }
 
-// The pixel phase-field operator of ifenn/verification.py on an n x m box, in one pass:
-// out = a * c - D * (K9*(c) - 3 c) - 2 H, with c the centre of ``ext`` ((n + 2) x (m + 2),
-// the box with its one-pixel frame, row-major), a = a0 + 2 H and H on the box (n x m);
-// with has_rhs = 0 the -2 H term is left out (the operator alone, for the conjugate gradients).
-void ifenn_pixel_operator(const double* ext, const double* history, double* out, int n, int m, double a0, double D,
-                          int has_rhs) {
-    const int64_t stride = m + 2;
-    for (int i = 0; i < n; ++i) {
-        const double* up = ext + static_cast<int64_t>(i) * stride;
-        const double* mid = up + stride;
-        const double* down = mid + stride;
-        const double* h = history + static_cast<int64_t>(i) * m;
-        double* o = out + static_cast<int64_t>(i) * m;
-        for (int j = 0; j < m; ++j) {
-            const double c = mid[j + 1];
-            const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
-            const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
-            const double a = a0 + 2.0 * h[j];
-            o[j] = a * c - D * (0.5 * edge + 0.25 * corner - 3.0 * c) - (has_rhs ? 2.0 * h[j] : 0.0);
-        }
-    }
-}
-
 }  // extern "C"
 
 namespace {
@@ -297,27 +274,24 @@ inline void mg_ghosts(const MGLevel& L, T* x) {
     }
 }
 
-// one row of A x (x padded, ghosts filled)
-inline real mg_row(const real* up, const real* mid, const real* down, int j, real d, real D) {
-    const real edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
-    const real corner = up[j] + up[j + 2] + down[j] + down[j + 2];
-    return d * mid[j + 1] - D * (real(0.5) * edge + real(0.25) * corner);
+// (A x)_j of one row (x padded, ghosts filled; d = a + 3 D): single for the V-cycle, double for the CG
+template <class T>
+inline T mg_row(const T* up, const T* mid, const T* down, int j, T d, T D) {
+    const T edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
+    const T corner = up[j] + up[j + 2] + down[j] + down[j + 2];
+    return d * mid[j + 1] - D * (T(0.5) * edge + T(0.25) * corner);
 }
 
-// y = b - A x, or y = A x when b is null
-void mg_apply(const MGLevel& L, const real* x, const real* b, real* y) {
+// y = b - A x
+void mg_residual(const MGLevel& L, const real* x, const real* b, real* y) {
     const int n = L.n, m = L.m;
     const int64_t w = m + 2;
     for (int i = 0; i < n; ++i) {
         const real* up = x + i * w;
         const real* d = L.diag.data() + static_cast<int64_t>(i) * m;
+        const real* bb = b + static_cast<int64_t>(i) * m;
         real* o = y + static_cast<int64_t>(i) * m;
-        if (b) {
-            const real* bb = b + static_cast<int64_t>(i) * m;
-            for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
-        } else {
-            for (int j = 0; j < m; ++j) o[j] = mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
-        }
+        for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
     }
 }
 
@@ -426,7 +400,7 @@ void mg_vcycle(std::vector<MGLevel>& levels, size_t k) {  // levels[k].x from le
         return;
     }
     mg_jacobi(L, MG_SMOOTH, true);
-    mg_apply(L, L.x.data(), L.b.data(), L.r.data());
+    mg_residual(L, L.x.data(), L.b.data(), L.r.data());
     mg_restrict(L, levels[k + 1]);
     mg_vcycle(levels, k + 1);
     mg_prolong_add(L, levels[k + 1]);
@@ -607,20 +581,9 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
             const double* down = mid + w;
             const double* d = diag + static_cast<int64_t>(i) * m;
             double* o = q + static_cast<int64_t>(i) * m;
-            int j = 0;
-            for (; j + 4 <= m; j += 4)
-                for (int k = 0; k < 4; ++k) {
-                    const int jj = j + k;
-                    const double edge = mid[jj] + mid[jj + 2] + up[jj + 1] + down[jj + 1];
-                    const double corner = up[jj] + up[jj + 2] + down[jj] + down[jj + 2];
-                    o[jj] = d[jj] * mid[jj + 1] - D * (0.5 * edge + 0.25 * corner);
-                    sums[k] += mid[jj + 1] * o[jj];
-                }
-            for (; j < m; ++j) {
-                const double edge = mid[j] + mid[j + 2] + up[j + 1] + down[j + 1];
-                const double corner = up[j] + up[j + 2] + down[j] + down[j + 2];
-                o[j] = d[j] * mid[j + 1] - D * (0.5 * edge + 0.25 * corner);
-                sums[0] += mid[j + 1] * o[j];
+            for (int j = 0; j < m; ++j) {
+                o[j] = mg_row(up, mid, down, j, d[j], D);
+                sums[j & 3] += mid[j + 1] * o[j];
             }
         }
         const double alpha = rz / ((sums[0] + sums[1]) + (sums[2] + sums[3]));
@@ -658,6 +621,6 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     return -1;
 }
 
-int ifenn_kernel_version() { return 4; }
+int ifenn_kernel_version() { return 5; }
 
 }

@@ -26,7 +26,7 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("orbit_kernel.cpp")
 FLAGS = ("-O3", "-march=native", "-std=c++17", "-shared", "-fPIC")
-VERSION = 4
+VERSION = 5
 #: floats after the last pixel of every buffer handed to the kernel (a chunk reads past a run's end)
 SLACK = 64
 ACTIVATIONS = {"none": 0, "tanh": 1, "sigmoid": 2}
@@ -81,8 +81,6 @@ def load() -> ctypes.CDLL | None:
     lib.ifenn_orbit_layer.restype = integer
     lib.ifenn_dilate.argtypes = [pointer, pointer, pointer, integer, integer, integer]
     lib.ifenn_dilate.restype = None
-    lib.ifenn_pixel_operator.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, ctypes.c_double, integer]
-    lib.ifenn_pixel_operator.restype = None
     lib.ifenn_pixel_residual.argtypes = [pointer, pointer, pointer, integer, integer, integer, integer, integer, integer,
                                          ctypes.c_double, ctypes.c_double, integer, integer]
     lib.ifenn_pixel_residual.restype = None

@@ -123,26 +123,18 @@ class PixelEquation:
         return np.pad(inner.astype(np.float64, copy=False), widths, mode="edge" if self.padding == "replicate" else "constant")
 
     def _operator(self, ext: np.ndarray, history: np.ndarray, with_rhs: bool) -> np.ndarray:
-        """(a c - D (K9*(c) - 3 c) [- 2 H]) for the centre c of ``ext``, a = Gc/lc + 2 H; in the
-        compiled kernel where it builds (one pass), else in numpy."""
-        lib = _kernel()
-        if lib is not None:
-            ext = np.ascontiguousarray(ext, dtype=np.float64)
-            history = np.ascontiguousarray(history, dtype=np.float64)
-            out = np.empty(history.shape)
-            lib.ifenn_pixel_operator(ext.ctypes.data, history.ctypes.data, out.ctypes.data, history.shape[0], history.shape[1],
-                                     self.reaction0, self.diffusion, int(with_rhs))
-            return out
+        """(a c - D (K9*(c) - 3 c) [- 2 H]) for the centre c of ``ext``, a = Gc/lc + 2 H, in numpy
+        (the fallback of the compiled residual and correction)."""
         centre = ext[1:-1, 1:-1]
         out = (self.reaction0 + 2.0 * history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
         return out - 2.0 * history if with_rhs else out
 
     def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool = True) -> np.ndarray:
         """Residual on ``box`` (its own shape): r = R / (Gc/lc + 2H), or R itself; in one pass of
-        the compiled kernel where it builds (phi and H float64, C-contiguous: the verified step's
-        own images), else in numpy."""
+        the compiled kernel where it builds (read from the image: no padded copy), else in numpy."""
         lib = _kernel()
-        if lib is not None and phi.dtype == history.dtype == np.float64 and phi.flags.c_contiguous and history.flags.c_contiguous:
+        if lib is not None:
+            phi, history = np.ascontiguousarray(phi, dtype=np.float64), np.ascontiguousarray(history, dtype=np.float64)
             ny, nx = phi.shape
             out = np.empty((box[0].stop - box[0].start, box[1].stop - box[1].start))
             lib.ifenn_pixel_residual(phi.ctypes.data, history.ctypes.data, out.ctypes.data, ny, nx, box[0].start, box[0].stop,

@@ -26,9 +26,9 @@ INCREMENT_COLUMNS = ["increment", "u", "reaction_force", "phi_max", "t_displacem
 
 def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
     """The FEM run and the whole-path IFENN run of ``spec``, each a StaggeredRun at its initial state."""
-    from .hybrid import make_inference
+    from .hybrid import pixel_phase_field
     from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import FEMPhaseField, PixelPhaseField
+    from .phase_field_steps import FEMPhaseField
     from .problem import FractureProblem
     from .solver import StaggeredRun
 
@@ -39,10 +39,7 @@ def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
         if method == "fem":
             step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
         else:
-            verified = bool((spec.get("verification") or {}).get("enabled"))
-            inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape)
-            step = PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
-                                   spec["irreversible"], verified)
+            step = pixel_phase_field(spec, problem, model_path)
         run_spec = {**copy.deepcopy(spec), "name": f"{spec['name']}-{method}", "save_fields": [], "checkpoint_every": 10**9}
         runs[method] = StaggeredRun(problem, step, run_spec, work / run_spec["name"], progress=False,
                                     row_constants={"hybrid_active": 1} if method == "ifenn" else None)
