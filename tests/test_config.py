@@ -49,6 +49,19 @@ def assert_refused(paper_config, mutate, expected):
         (lambda c: c["speed_accuracy"]["snt1"].update(reference="snt9"), ["speed_accuracy.snt1.reference", "'snt9'"]),
         (lambda c: c["ifenn_runs"]["snt1-I-pz"].update(evaluation="convolution"),
          ["ifenn_runs.snt1-I-pz.inference", "process_zone needs", "'convolution'"]),
+        # refused here, not when the mesh is built or PETSc starts
+        (lambda c: c["scenes"]["snt1"].update(elements=[200, 100]), ["scenes.snt1.elements", "[200, 100]", "square", "1 : 1"]),
+        (lambda c: c["ifenn"].update(switch_phi_max=1.0), ["ifenn.switch_phi_max", "1.0", "maximum"]),
+        (lambda c: c["solver"]["linear_solver_presets"]["iterative"]["displacement"].update(pc_type="gamgg"),
+         ["solver.linear_solver_presets.iterative.displacement.pc_type", "'gamgg'", "'gamg'"]),
+        (lambda c: c["solver"]["linear_solver_presets"]["direct"]["phase_field"].update(pc_factor_mat_solver_type="mumsp"),
+         ["linear_solver_presets.direct.phase_field.pc_factor_mat_solver_type", "'mumsp'", "'mumps'"]),
+        (lambda c: c["solver"]["linear_solver_presets"]["iterative"]["phase_field"].update(sub_pc_type="iccc"),
+         ["iterative.phase_field.sub_pc_type", "'iccc'", "'icc'"]),
+        (lambda c: c["solver"]["linear_solver_presets"]["iterative"]["displacement"].update(ksp_rtol="1e-8"),
+         ["iterative.displacement.ksp_rtol", "'1e-8'", "positive number"]),
+        (lambda c: c["solver"]["linear_solver_presets"]["gamg-reuse"]["displacement"].update(mg_levels_ksp_max_it=0),
+         ["gamg-reuse.displacement.mg_levels_ksp_max_it", "positive integer"]),
     ],
 )
 def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):

@@ -104,6 +104,36 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
     return config
 
 
+#: PETSc options whose value names a PETSc type, and the petsc4py enumeration of its names
+_PETSC_TYPE_OPTIONS = {"ksp_type": "KSP", "pc_type": "PC", "pc_factor_mat_solver_type": "SOLVER", "pc_factor_mat_ordering_type": "ORDERING"}
+
+
+def _petsc_problems(key: str, options: dict) -> list[str]:
+    """Values of PETSc options that PETSc would refuse only inside a run: an unknown type name
+    (``ksp_type``, ``pc_type``, the factor's solver and ordering, also behind a ``sub_`` or
+    ``mg_levels_`` prefix) and a tolerance or iteration limit that is not a positive number."""
+    try:
+        from petsc4py import PETSc
+    except ImportError:  # checked again by PETSc itself when the run starts
+        return []
+    enums = {"KSP": PETSc.KSP.Type, "PC": PETSc.PC.Type, "SOLVER": PETSc.Mat.SolverType, "ORDERING": PETSc.Mat.OrderingType}
+    problems = []
+    for option, value in options.items():
+        base = option.removeprefix("sub_").removeprefix("mg_levels_").removeprefix("mg_coarse_")
+        if base in _PETSC_TYPE_OPTIONS:
+            enum = enums[_PETSC_TYPE_OPTIONS[base]]
+            allowed = sorted({getattr(enum, name) for name in dir(enum) if not name.startswith("_")
+                              and isinstance(getattr(enum, name), str)})
+            if str(value) not in allowed:
+                problems.append(f"config key '{key}.{option}': {value!r} is not a PETSc type of that kind; allowed: {allowed}")
+        elif base.endswith(("_rtol", "_atol", "_max_it")):
+            integral = base.endswith("_max_it")
+            good = isinstance(value, int if integral else (int, float)) and not isinstance(value, bool) and value > 0
+            if not good:
+                problems.append(f"config key '{key}.{option}': {value!r} must be a positive {'integer' if integral else 'number'}")
+    return problems
+
+
 def _semantic_problems(config: dict) -> list[str]:
     problems: list[str] = []
     presets = config["solver"]["linear_solver_presets"]
@@ -116,12 +146,20 @@ def _semantic_problems(config: dict) -> list[str]:
         if "displacement_reuse" in preset and preset["displacement"].get("ksp_type", "gmres") == "preonly":
             problems.append(f"config key 'solver.linear_solver_presets.{name}.displacement_reuse': a kept preconditioner "
                             "needs a Krylov solve (ksp_type cg, ...), got ksp_type 'preonly'")
+    for name, preset in presets.items():
+        for field in ("displacement", "phase_field"):
+            problems += _petsc_problems(f"solver.linear_solver_presets.{name}.{field}", preset[field])
     for name, scene in config["scenes"].items():
         key = f"scenes.{name}"
         (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
         if not (x0 < x1 and y0 < y1):
             problems.append(f"config key '{key}.domain': need x[0] < x[1] and y[0] < y[1], got {scene['domain']}")
             continue
+        hx, hy = (x1 - x0) / scene["elements"][0], (y1 - y0) / scene["elements"][1]
+        if abs(hx - hy) > 1e-9 * hx:  # the test of ifenn.mesh.element_size, before any mesh is built
+            problems.append(f"config key '{key}.elements': {scene['elements']} on the domain {scene['domain']} gives "
+                            f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
+                            f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
         if not any("load" in edge.values() for edge in scene["boundary"].values()):
             problems.append(f"config key '{key}.boundary': no edge component is 'load'; at least one must be")
         tol = 1e-12 * max(x1 - x0, y1 - y0)
