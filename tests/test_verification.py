@@ -9,7 +9,7 @@ from ifenn.orbit import OrbitEvaluator
 from ifenn.picnn import PICNN, InputScaling, residual, solve_pixel_equation
 from ifenn.process_zone import FullInference, ProcessZoneInference
 from ifenn.training import synthetic_history
-from ifenn.verification import PixelEquation, VerifiedInference, normalised_residual
+from ifenn.verification import PixelEquation, VerifiedInference, _boxes, _dilated, normalised_residual
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
 
@@ -86,6 +86,23 @@ def test_box_solve_with_the_surroundings_as_boundary_data_is_the_exact_solution(
         np.testing.assert_allclose(phi, exact, atol=1e-9)
         if solver == "multigrid":  # ~0.1 per V-cycle: 1e-12 of the start in 9-13, where the sine transform needs 25-53
             assert iterations <= 16, (box, iterations)
+
+
+@pytest.mark.parametrize("margin", [0, 3, 17, 60, 110])
+def test_correction_boxes_cover_every_pixel_within_the_margin(margin):
+    """The boxes are computed on blocks of margin // 8 pixels: they must still hold every pixel
+    within ``margin`` of a failing one (the reach the margin argument asks for)."""
+    rng = np.random.default_rng(margin)
+    for _ in range(40):
+        ny, nx = (int(v) for v in rng.integers(20, 400, 2))
+        mask = np.zeros((ny, nx), bool)
+        for _ in range(int(rng.integers(1, 5))):
+            r, c = int(rng.integers(0, ny)), int(rng.integers(0, nx))
+            mask[r:r + int(rng.integers(1, 20)), c:c + int(rng.integers(1, 20))] = True
+        cover = np.zeros_like(mask)
+        for box in _boxes(mask, margin):
+            cover[box] = True
+        assert not (_dilated(mask, margin) & ~cover).any()
 
 
 def test_the_exact_solution_as_prediction_corrects_nothing(history):

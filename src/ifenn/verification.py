@@ -255,14 +255,30 @@ def _dilated(mask: np.ndarray, by: int) -> np.ndarray:
 
 
 def _boxes(mask: np.ndarray, margin: int) -> list[Box]:
-    """Bounding boxes of the connected groups of ``mask`` grown by ``margin`` pixels; boxes
-    that overlap are merged."""
+    """Bounding boxes of the connected groups of ``mask`` grown by at least ``margin`` pixels;
+    boxes that overlap are merged.
+
+    Computed on blocks of b = margin // 8 pixels (b = 1 for small margins): a block is set
+    where any of its pixels is, the blocks are grown by ceil(margin / b) and grouped, and each
+    group's box is taken back to pixels. Every pixel within ``margin`` of a set pixel lies in
+    a box (the boxes exceed the exact ones by less than 2 b on each side), at 1 / b^2 of the
+    cost: the dilation of a large mask by a margin of 6 lc otherwise costs about as much as a
+    multigrid iteration of the correction."""
     crop = _bounding_box(mask, margin)
     if crop is None:
         return []
-    grown = _dilated(mask[crop], margin)
+    block = max(1, margin // 8)
+    sub = mask[crop]
+    if block > 1:
+        ny, nx = -(-sub.shape[0] // block), -(-sub.shape[1] // block)
+        padded = np.zeros((ny * block, nx * block), bool)
+        padded[:sub.shape[0], :sub.shape[1]] = sub
+        sub = padded.reshape(ny, block, nx, block).any(axis=(1, 3))
+    grown = _dilated(sub, -(-margin // block))
     labels, _ = scipy.ndimage.label(grown, structure=np.ones((3, 3), int))
-    boxes = [tuple(slice(s.start + c.start, s.stop + c.start) for s, c in zip(b, crop, strict=True))
+    shape = mask.shape
+    boxes = [tuple(slice(min(c.start + s.start * block, n), min(c.start + s.stop * block, c.stop, n))
+                   for s, c, n in zip(b, crop, shape, strict=True))
              for b in scipy.ndimage.find_objects(labels) if b is not None]
     merged = True
     while merged and len(boxes) > 1:
