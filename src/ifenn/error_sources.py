@@ -61,16 +61,15 @@ Serial (one process); the package takes paths and knows nothing of Snakemake.
 from __future__ import annotations
 
 import copy
-import json
 import logging
 import time
 from pathlib import Path
 
-import h5py  # before dolfinx (dolfinx sets RTLD_GLOBAL: SPEC section 7)
 import numpy as np
 import pandas as pd
 import scipy.ndimage
 
+from . import run_files
 from .hybrid import switch_state
 
 log = logging.getLogger(__name__)
@@ -97,18 +96,9 @@ def saved_states(fields_path: str | Path, after: int | None = None) -> tuple[int
     ``increment``, ``u`` (mm), ``history`` and ``phase_field_gp`` pixel maps (ny_px, nx_px),
     nodal ``phase_field`` (n_nodes,) and ``displacement`` (n_nodes, 2) in mesh-file order; only
     increments > ``after`` (default: the switch increment), ascending."""
-    with h5py.File(fields_path, "r") as h5:
-        attrs = dict(h5.attrs)
-        switch = int(attrs["switch_increment"])
-        first = switch if after is None else after
-        states = []
-        for name in sorted(h5):
-            group = h5[name]
-            increment = int(group.attrs["increment"])
-            if increment > first:
-                states.append({"increment": increment, "u": float(group.attrs["u"]),
-                               **{key: group[key][()] for key in ("history", "phase_field_gp", "phase_field", "displacement")}})
-    return switch, attrs, states
+    attrs = run_files.fields_attrs(fields_path)
+    switch = int(attrs["switch_increment"])
+    return switch, attrs, run_files.read_states(fields_path, after=switch if after is None else after)
 
 
 def postswitch_error(ifenn_history: pd.DataFrame, fem_history: pd.DataFrame) -> dict:
@@ -307,9 +297,9 @@ def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi
     """
     source_rows, state_rows = [], []
     for case in cases:
-        spec = json.loads(Path(case["spec"]).read_text())
+        spec = run_files.read_spec(case["spec"])
         fem_dir = Path(case["fem_dir"])
-        fem_history = pd.read_csv(fem_dir / "history.csv")
+        fem_history = run_files.read_history(fem_dir)
         if case.get("ifenn_history"):
             figures = postswitch_error(pd.read_csv(case["ifenn_history"]), fem_history)
         else:
@@ -319,7 +309,7 @@ def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi
                        "final_force_fem": float(abs(fem_history.reaction_force.iloc[-1]) / fem_history.reaction_force.abs().max())}
         context = {"run": spec["name"], "fem_run": spec["fem_run"], **figures}
         peak = context["fem_peak_force"]
-        switch, _, states = saved_states(fem_dir / "fields.h5")
+        switch, _, states = saved_states(fem_dir / run_files.FIELDS)
         switch_phase_field = switch_state(fem_dir)[1]["phase_field_gp"]
         if not states:
             raise ValueError(f"FEM run {fem_dir} saved no state after its switch-over increment {switch}: nothing to replay")

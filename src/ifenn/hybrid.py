@@ -23,9 +23,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import h5py
-import pandas as pd
 from mpi4py import MPI
+
+from . import run_files
 
 PREDICTORS = ("picnn", "exact_pixel")
 
@@ -35,20 +35,17 @@ def switch_state(fem_dir: str | Path, increment: int | None = None) -> tuple[int
     ``increment`` the switch is the FEM run's phi-threshold increment (-1, the state None and
     all rows if the FEM run never reached the threshold); with it, that increment, whose state
     the FEM run must have saved."""
-    fem_dir = Path(fem_dir)
-    with h5py.File(fem_dir / "fields.h5", "r") as h5:
-        switch = int(h5.attrs["switch_increment"]) if increment is None else int(increment)
-        state = None
-        if switch > 0:
-            name = f"increment_{switch:06d}"
-            if name not in h5:
-                saved = sorted(int(g.split("_")[1]) for g in h5)
-                raise KeyError(f"FEM run {fem_dir} did not save increment {switch} (saved: {saved}): "
-                               "nothing to switch over from")
-            group = h5[name]
-            state = {key: group[key][()] for key in ("displacement", "phase_field", "history", "phase_field_gp")}
-            state["phase_field"] = state["phase_field"][:, None]
-    history = pd.read_csv(fem_dir / "history.csv")
+    fields = Path(fem_dir) / run_files.FIELDS
+    switch = int(run_files.fields_attrs(fields)["switch_increment"]) if increment is None else int(increment)
+    state = None
+    if switch > 0:
+        try:
+            (state,) = run_files.read_states(fields, [switch])
+        except KeyError as error:
+            raise KeyError(f"FEM run {fem_dir} did not save increment {switch}: nothing to switch over from ({error})") from None
+        state = {key: state[key] for key in run_files.FIELD_KEYS}
+        state["phase_field"] = state["phase_field"][:, None]
+    history = run_files.read_history(fem_dir)
     rows = history[history.increment <= max(switch, 0)].to_dict("records") if switch > 0 else history.to_dict("records")
     return switch, state, rows
 

@@ -6,13 +6,13 @@ FEM and IFENN are measured with the same discrete operators.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pandas as pd
 import scipy.ndimage
+
+from .run_files import FIELDS, SPEC, read_history, read_phase_field_maps, read_spec
 
 CRACK_PHI = 0.5
 
@@ -31,12 +31,6 @@ def crack_iou(phi_a: np.ndarray, phi_b: np.ndarray, threshold: float = CRACK_PHI
     a, b = phi_a >= threshold, phi_b >= threshold
     union = np.logical_or(a, b).sum()
     return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
-
-
-def _fields(path: Path) -> tuple[dict, dict]:
-    with h5py.File(path, "r") as h5:
-        maps = {int(g.split("_")[1]): (float(h5[g].attrs["u"]), h5[g]["phase_field_gp"][()]) for g in h5}
-        return maps, dict(h5.attrs)
 
 
 def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force_ref: np.ndarray, points: int = 4000) -> float:
@@ -136,8 +130,8 @@ def _nearest(maps: dict, u: float) -> int:
 def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels: int = 3) -> dict:
     """Force-curve and crack metrics of an IFENN run against its FEM run (same scene and
     schedule; adaptive schedules are compared at equal u)."""
-    fem = pd.read_csv(Path(fem_dir) / "history.csv")
-    ifenn = pd.read_csv(Path(ifenn_dir) / "history.csv")
+    fem = read_history(fem_dir)
+    ifenn = read_history(ifenn_dir)
     f_fem, f_ifenn = fem.reaction_force.to_numpy(), ifenn.reaction_force.to_numpy()
     peak_fem, peak_ifenn = int(np.argmax(f_fem)), int(np.argmax(f_ifenn))
     switch = int(ifenn.increment[ifenn.hybrid_active == 1].min()) if (ifenn.hybrid_active == 1).any() else len(ifenn) + 1
@@ -150,17 +144,16 @@ def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels:
         "final_force_fraction_fem": f_fem[-1] / f_fem[peak_fem], "final_force_fraction_ifenn": f_ifenn[-1] / f_fem[peak_fem],
         **post_switch_force_error(fem, ifenn),
     }
-    fem_maps, attrs = _fields(Path(fem_dir) / "fields.h5")
-    ifenn_maps, _ = _fields(Path(ifenn_dir) / "fields.h5")
+    fem_maps, attrs = read_phase_field_maps(Path(fem_dir) / FIELDS)
+    ifenn_maps, _ = read_phase_field_maps(Path(ifenn_dir) / FIELDS)
     h_px = float(attrs["h_px"])
     last_fem = max(fem_maps)
     last_ifenn = _nearest(ifenn_maps, fem_maps[last_fem][0])
     row["dissipated_energy_fem"] = dissipated_energy(fem_maps[last_fem][1], h_px, material["Gc"], material["lc"])
     row["dissipated_energy_ifenn"] = dissipated_energy(ifenn_maps[last_ifenn][1], h_px, material["Gc"], material["lc"])
     row["dissipated_energy_rel_error"] = row["dissipated_energy_ifenn"] / row["dissipated_energy_fem"] - 1.0
-    spec_path = Path(fem_dir) / "spec.json"
-    if spec_path.exists():
-        tips = _notch_tips(json.loads(spec_path.read_text())["scene"], attrs)
+    if (Path(fem_dir) / SPEC).exists():
+        tips = _notch_tips(read_spec(fem_dir)["scene"], attrs)
         row["crack_ridge_phi_fem"] = crack_ridge_phi(fem_maps[last_fem][1], tips)
         row["crack_ridge_phi_ifenn"] = crack_ridge_phi(ifenn_maps[last_ifenn][1], tips)
     u_switch = row["u_switch"] if np.isfinite(row["u_switch"]) else np.inf
@@ -223,9 +216,9 @@ def process_zone_agreement(zone_dir: str | Path, full_dir: str | Path) -> dict:
     peak and final force difference, largest |phi| difference and crack IoU at the last saved
     increment; the share of the image whose network output was computed anew and the phase-field step's time of
     each (two runs, so machine load may differ: see the phase-field benchmark for one run)."""
-    zone, full = (pd.read_csv(Path(d) / "history.csv") for d in (zone_dir, full_dir))
-    zone_maps, _ = _fields(Path(zone_dir) / "fields.h5")
-    full_maps, _ = _fields(Path(full_dir) / "fields.h5")
+    zone, full = (read_history(d) for d in (zone_dir, full_dir))
+    zone_maps, _ = read_phase_field_maps(Path(zone_dir) / FIELDS)
+    full_maps, _ = read_phase_field_maps(Path(full_dir) / FIELDS)
     last = max(set(zone_maps) & set(full_maps))
     a, b = zone_maps[last][1], full_maps[last][1]
     hz, hf = zone[zone.hybrid_active == 1], full[full.hybrid_active == 1]

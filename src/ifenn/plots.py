@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from .io import atomic_path  # noqa: E402
+from .run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
 
 
 def _save(fig, path) -> None:
@@ -164,15 +165,6 @@ def training_figure(data: dict, model, loss, path) -> None:
             fig.colorbar(im, ax=ax, fraction=0.046)
     fig.tight_layout()
     _save(fig, path)
-
-
-def read_phase_field_maps(fields_path) -> tuple[dict, dict]:
-    """{increment: (u, phase_field_gp map)} and the root attrs of a run's fields.h5."""
-    import h5py
-
-    with h5py.File(fields_path, "r") as h5:
-        maps = {int(g.split("_")[1]): (float(h5[g].attrs["u"]), h5[g]["phase_field_gp"][()]) for g in h5}
-        return maps, dict(h5.attrs)
 
 
 def _window(attrs: dict, zoom: dict | None):

@@ -4,12 +4,11 @@ resumable checkpoints and the run's outputs.
 Per increment: solve u with the current phi, update H = max(H_prev, psi0+), run the
 phase-field step; repeat until max|delta phi| < tol or max_iterations (1 = single pass).
 
-Outputs of a run directory (written atomically, on rank 0):
+Outputs of a run directory (written atomically, on rank 0; the formats: :mod:`ifenn.run_files`):
   history.csv      one row per increment (HISTORY_COLUMNS)
-  fields.h5        per saved increment: pixel maps 'history', 'phase_field_gp'; nodal
-                   'phase_field' (n_nodes,), 'displacement' (n_nodes, 2) in mesh-file node order.
-                   The first increment whose phi_max exceeds spec['switch_phi_max'] is always
-                   saved (root attr 'switch_increment', -1 if none): a hybrid run starts there.
+  fields.h5        the saved increments. The first increment whose phi_max exceeds
+                   spec['switch_phi_max'] is always saved (root attr 'switch_increment', -1 if
+                   none): a hybrid run starts there.
   paraview.xdmf/.h5  nodal phi and u at the saved increments, for ParaView
   provenance.json  spec hash, versions, ranks, wall time
 Work files (resumable state, removed when the run completes): .work/
@@ -25,8 +24,9 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from . import run_files
 from .config import spec_hash
-from .io import atomic_path, provenance, write_csv, write_json
+from .io import atomic_path, provenance
 
 log = logging.getLogger(__name__)
 
@@ -381,8 +381,8 @@ class StaggeredRun:
             import pandas as pd
 
             self._write_fields()
-            write_csv(self.out_dir / "history.csv", pd.DataFrame(self.rows, columns=self.columns))
-            write_json(self.out_dir / "provenance.json", provenance(
+            run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=self.columns))
+            run_files.write_provenance(self.out_dir, provenance(
                 self.hash, wall_s, run=self.spec["name"], mpi_ranks=self.comm.size,
                 phase_field_step=self.step.name, increments=len(self.rows), **self.provenance_extra))
             for path in self.work_dir.glob("*"):
@@ -394,19 +394,14 @@ class StaggeredRun:
         return sorted(self.work_dir.glob("fields_*.npz"))
 
     def _write_fields(self) -> None:
-        import h5py
+        def states():
+            for path in self._snapshots():
+                with np.load(path) as data:
+                    yield {key: data[key] for key in ("increment", "u", *run_files.FIELD_KEYS)}
 
-        with atomic_path(self.out_dir / "fields.h5") as tmp:
-            with h5py.File(tmp, "w") as h5:
-                h5.attrs.update({**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash,
-                                 "switch_increment": self.switch_increment or -1})
-                for path in self._snapshots():
-                    with np.load(path) as data:
-                        group = h5.create_group(f"increment_{int(data['increment']):06d}")
-                        group.attrs.update({"u": float(data["u"]), "increment": int(data["increment"])})
-                        for key in ("history", "phase_field_gp", "phase_field", "displacement"):
-                            values = data[key]
-                            group.create_dataset(key, data=values[:, 0] if key == "phase_field" else values, compression="gzip")
+        attrs = {**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash,
+                 "switch_increment": self.switch_increment or -1}
+        run_files.write_fields(self.out_dir / run_files.FIELDS, attrs, states())
 
     def _write_paraview(self) -> None:
         """XDMF of nodal phi and u at the saved increments (time = u), written in a temporary

@@ -1,4 +1,4 @@
-"""Speed against accuracy (issue 5): every method variant of a scene as a point, wall time
+"""Speed against accuracy: every method variant of a scene as a point, wall time
 (whole run and propagation stage) against the force-curve error versus a reference run.
 
 Reference: a FEM run named in the config (the finest schedule with converged staggering,
@@ -20,28 +20,23 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .config import switch_over
 from .metrics import force_curve_error
+from .run_files import read_history, read_spec
 
 
-def _label(config: dict, method: str, run: str) -> str:
+def _label(method: str, spec: dict) -> str:
+    """A run's variant, from its resolved spec (spec.json)."""
+    stagger = "converged" if spec["stagger_max_iterations"] > 1 else "single pass"
     if method == "fem":
-        entry = config["fem_runs"][run]
-        stagger = "converged" if entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1 else "single pass"
-        solver = entry.get("linear_solvers", config["solver"]["linear_solvers"])
-        return f"FEM {entry['schedule']}, {stagger}, {solver}"
-    entry = config["ifenn_runs"][run]
-    fem = config["fem_runs"][entry["fem_run"]]
-    stagger = "converged" if fem.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1 else "single pass"
-    predictor = entry.get("predictor", config["ifenn"]["predictor"])
-    inference = entry.get("inference", config["ifenn"]["inference"])
-    what = "exact pixel solve" if predictor == "exact_pixel" else ("PICNN process zone" if inference == "process_zone" else "PICNN full image")
-    verification = {**config["ifenn"].get("verification", {}), **entry.get("verification", {})}
+        return f"FEM {spec['schedule_name']}, {stagger}, {spec['linear_solvers']}"
+    what = ("exact pixel solve" if spec["predictor"] == "exact_pixel"
+            else ("PICNN process zone" if spec["inference"] == "process_zone" else "PICNN full image"))
+    verification = spec.get("verification") or {}
     if verification.get("enabled"):
         what = "verified, no network" if verification.get("warm_start") == "previous" else f"verified {what}"
-    if switch_over(config, run)[0] == "start":
+    if spec.get("switch_over") == "start":
         what += ", whole path"
-    return f"IFENN {fem['schedule']}, {stagger}, {what}"
+    return f"IFENN {spec['schedule_name']}, {stagger}, {what}"
 
 
 def pareto_front(time: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -54,25 +49,25 @@ def pareto_front(time: np.ndarray, error: np.ndarray) -> np.ndarray:
     return front
 
 
-def speed_accuracy_table(config: dict, results: str | Path = "results") -> pd.DataFrame:
-    results = Path(results)
+def speed_accuracy_table(setups: dict, run_dirs: dict[str, dict[str, str | Path]]) -> pd.DataFrame:
+    """``setups``: config 'speed_accuracy' (per scene: reference, fem and ifenn runs);
+    ``run_dirs``: {"fem": {run: directory}, "ifenn": {run: directory}}, each holding the run's
+    history.csv and spec.json (every option is read from the spec the run used)."""
     rows = []
-    for scene, setup in config["speed_accuracy"].items():
-        ref = pd.read_csv(results / "fem" / setup["reference"] / "history.csv")
+    for scene, setup in setups.items():
+        ref = read_history(run_dirs["fem"][setup["reference"]])
         for method in ("fem", "ifenn"):
             for run in setup.get(method, []):
-                history = pd.read_csv(results / method / run / "history.csv")
-                switch = history.increment[history.phi_max > config["ifenn"]["switch_phi_max"]]
+                history, spec = read_history(run_dirs[method][run]), read_spec(run_dirs[method][run])
+                switch = history.increment[history.phi_max > spec["switch_phi_max"]]
                 switch = int(switch.iloc[0]) if len(switch) else int(history.increment.iloc[-1])
-                whole = method == "ifenn" and switch_over(config, run)[0] == "start"
+                whole = method == "ifenn" and spec.get("switch_over") == "start"
                 if method == "ifenn" and not whole and (history.hybrid_active == 1).any():
                     switch = int(history.increment[history.hybrid_active == 1].min()) - 1
-                fem_run = run if method == "fem" else config["ifenn_runs"][run]["fem_run"]
-                fem_entry = config["fem_runs"][fem_run]
                 rows.append({
-                    "scene": scene, "method": method, "run": run, "variant": _label(config, method, run),
-                    "schedule": fem_entry["schedule"],
-                    "converged": fem_entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1,
+                    "scene": scene, "method": method, "run": run, "variant": _label(method, spec),
+                    "schedule": spec["schedule_name"],
+                    "converged": spec["stagger_max_iterations"] > 1,
                     "increments": len(history), "stagger_iterations": int(history.stagger_iterations.sum()),
                     # load-independent cost: every displacement solve, rejected adaptive attempts included
                     "displacement_solves": int(history.stagger_iterations.sum()

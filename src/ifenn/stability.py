@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import run_files
 from .config import fem_run_spec, ifenn_run_spec
 
 LABELS = ("ok", "peak off", "crack path wrong", "no load drop", "diverged")
@@ -107,26 +108,21 @@ def resample(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def cell_metrics(cell_dir: str | Path, reference_dir: str | Path) -> dict:
     """Peak and final force, crack IoU of the final phase field against the reference
     (both resampled to the coarser pixel grid) and the reference's peak force."""
-    import json
-
-    import h5py
-    import pandas as pd
-
     from .metrics import crack_iou, force_curve_error
 
     cell_dir, reference_dir = Path(cell_dir), Path(reference_dir)
-    status = json.loads((cell_dir / "status.json").read_text())
+    status = run_files.read_status(cell_dir)
     out = {"status": status["status"], "error": status.get("error", ""), "wall_s": status.get("wall_s", np.nan)}
-    ref_status = json.loads((reference_dir / "status.json").read_text())
+    ref_status = run_files.read_status(reference_dir)
     if status["status"] != "ok" or ref_status["status"] != "ok":
         if status["status"] == "ok":
             out["status"] = "reference failed"
         return out
-    history, reference = pd.read_csv(cell_dir / "history.csv"), pd.read_csv(reference_dir / "history.csv")
+    history, reference = run_files.read_history(cell_dir), run_files.read_history(reference_dir)
 
     def final_phi(path):
-        with h5py.File(path / "fields.h5", "r") as h5:
-            return h5[sorted(h5)[-1]]["phase_field_gp"][()]
+        fields = path / run_files.FIELDS
+        return run_files.read_states(fields, run_files.saved_increments(fields)[-1:], keys=("phase_field_gp",))[0]["phase_field_gp"]
 
     a, b = final_phi(cell_dir), final_phi(reference_dir)
     shape = min(a.shape, b.shape)
@@ -176,15 +172,13 @@ def stability_table(config: dict, cell_root: str | Path):
 def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None, model: str | Path | None = None) -> dict:
     """Run one cell (FEM, or IFENN continuing ``fem_dir``); never raises for a solver
     failure: status.json says 'ok', 'diverged' (with the error) or 'not started'."""
-    import json
     import time
 
-    from .io import write_json
     from .mesh import build_mesh, write_mesh
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    for stale in ("status.json", "history.csv", "fields.h5", "paraview.xdmf", "paraview.h5", "provenance.json"):
+    for stale in (run_files.STATUS, run_files.HISTORY, run_files.FIELDS, "paraview.xdmf", "paraview.h5", run_files.PROVENANCE):
         (out_dir / stale).unlink(missing_ok=True)
     started = time.perf_counter()
     status = {"status": "ok"}
@@ -197,7 +191,7 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
         else:
             from .hybrid import run_ifenn
 
-            fem_status = json.loads((Path(fem_dir) / "status.json").read_text())
+            fem_status = run_files.read_status(fem_dir)
             if fem_status["status"] != "ok":
                 status = {"status": "diverged", "error": f"its FEM cell failed: {fem_status.get('error', '')}"}
             else:
@@ -205,5 +199,5 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
     except (RuntimeError, FloatingPointError, ValueError, ArithmeticError) as error:
         status = {"status": "diverged", "error": str(error)[:500]}
     status["wall_s"] = time.perf_counter() - started
-    write_json(out_dir / "status.json", status)
+    run_files.write_status(out_dir, status)
     return status

@@ -12,24 +12,21 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from . import run_files
 from .io import atomic_path
-
-GEOMETRY = ("x0", "y0", "h_px", "nx_px", "ny_px")
 
 
 def extract_training_data(fields_path: str | Path, increments: list[int], out_path: str | Path) -> None:
-    with h5py.File(fields_path, "r") as fields:
-        missing = [i for i in increments if f"increment_{i:06d}" not in fields]
-        if missing:
-            raise KeyError(f"{fields_path} has no fields for increments {missing}; saved: {sorted(fields)}")
-        groups = [fields[f"increment_{i:06d}"] for i in increments]
-        with atomic_path(out_path) as tmp, h5py.File(tmp, "w") as out:
-            out.attrs.update({k: fields.attrs[k] for k in GEOMETRY})
-            out.attrs["run"] = fields.attrs["run"]
-            for key in ("history", "phase_field_gp"):
-                out.create_dataset(key, data=np.stack([g[key][()] for g in groups]), compression="gzip")
-            out["increment"] = np.array(increments)
-            out["u"] = np.array([g.attrs["u"] for g in groups])
+    """The training file: the pixel maps of ``increments`` of a FEM run's fields.h5, stacked."""
+    states = run_files.read_states(fields_path, increments, keys=run_files.MAP_KEYS)
+    attrs = run_files.fields_attrs(fields_path)
+    with atomic_path(out_path) as tmp, h5py.File(tmp, "w") as out:
+        out.attrs.update({k: attrs[k] for k in run_files.GRID_ATTRS})
+        out.attrs["run"] = attrs["run"]
+        for key in run_files.MAP_KEYS:
+            out.create_dataset(key, data=np.stack([s[key] for s in states]), compression="gzip")
+        out["increment"] = np.array(increments)
+        out["u"] = np.array([s["u"] for s in states])
 
 
 def read_training_data(path: str | Path) -> dict:

@@ -30,6 +30,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from . import run_files
+from .run_files import read_history, read_spec
+
 DEFAULT_TARGETS = {"peak_force": 0.01, "u_peak": 0.02, "post_peak_rms": 0.02, "final_force": 0.02}
 
 #: verified-step columns of history.csv summarised per stage: (column, statistic)
@@ -88,14 +91,14 @@ def whole_path_comparison(fem: pd.DataFrame, ifenn: pd.DataFrame, switch_phi_max
     return row
 
 
-def whole_path_table(runs: dict[str, str], results: str | Path, switch_phi_max: float, targets: dict | None = None) -> pd.DataFrame:
-    """``runs``: whole-path IFENN run -> FEM run; histories read from ``results``/ifenn|fem/RUN."""
-    results = Path(results)
+def whole_path_table(runs: dict[str, dict], targets: dict | None = None) -> pd.DataFrame:
+    """``runs``: whole-path IFENN run -> {"fem_run": name, "fem_dir": ..., "ifenn_dir": ...};
+    the histories and the switch threshold (of the FEM run's spec.json) are read there."""
     rows = []
-    for run, fem_run in runs.items():
-        fem = pd.read_csv(results / "fem" / fem_run / "history.csv")
-        ifenn = pd.read_csv(results / "ifenn" / run / "history.csv")
-        rows.append({"run": run, "fem_run": fem_run, **whole_path_comparison(fem, ifenn, switch_phi_max, targets)})
+    for run, where in runs.items():
+        fem, ifenn = read_history(where["fem_dir"]), read_history(where["ifenn_dir"])
+        switch_phi_max = read_spec(where["fem_dir"])["switch_phi_max"]
+        rows.append({"run": run, "fem_run": where["fem_run"], **whole_path_comparison(fem, ifenn, switch_phi_max, targets)})
     return pd.DataFrame(rows)
 
 
@@ -109,8 +112,6 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     its largest normalised residual max |r| (the check's quantity; >= the largest error) and the
     share of pixels with |r| above the verification tolerance. With ``ifenn_history`` (the
     whole-path run's), its verified step's record at that increment is added."""
-    import h5py
-
     from .hybrid import _network_inference
     from .picnn import solve_pixel_equation
     from .verification import PixelEquation
@@ -118,13 +119,12 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     network_spec = {**spec, "inference": "full", "smoothing_sigma": None}
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
     tolerance = (spec.get("verification") or {}).get("tolerance", 1e-3)
-    with h5py.File(fem_fields, "r") as h5:
-        h_px, switch = float(h5.attrs["h_px"]), int(h5.attrs["switch_increment"])
-        saved = sorted(int(name.split("_")[1]) for name in h5)
-        before = [k for k in saved if switch <= 0 or k < switch]
-        later = [k for k in saved if switch > 0 and k >= switch][:after]
-        states = {k: (float(h5[f"increment_{k:06d}"].attrs["u"]), h5[f"increment_{k:06d}"]["history"][()],
-                      h5[f"increment_{k:06d}"]["phase_field_gp"][()]) for k in before + later}
+    attrs, saved = run_files.fields_attrs(fem_fields), run_files.saved_increments(fem_fields)
+    h_px, switch = float(attrs["h_px"]), int(attrs["switch_increment"])
+    before = [k for k in saved if switch <= 0 or k < switch]
+    later = [k for k in saved if switch > 0 and k >= switch][:after]
+    states = {s["increment"]: (s["u"], s["history"], s["phase_field_gp"])
+              for s in run_files.read_states(fem_fields, before + later, keys=run_files.MAP_KEYS)}
     equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"])
     network = _network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape)
     rows = []

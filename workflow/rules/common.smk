@@ -72,10 +72,21 @@ def comparison_inputs(run):
     return inputs
 
 
+def run_pairs():
+    """IFENN run -> its FEM run's name and both run directories, for every IFENN run."""
+    return {run: {"fem_run": entry["fem_run"], "fem_dir": f"results/fem/{entry['fem_run']}", "ifenn_dir": f"results/ifenn/{run}"}
+            for run, entry in config["ifenn_runs"].items()}
+
+
+def speed_accuracy_dirs():
+    """{"fem": {run: directory}, "ifenn": {run: directory}} of the speed-accuracy runs."""
+    setups = config["speed_accuracy"].values()
+    return {"fem": {r: f"results/fem/{r}" for s in setups for r in [s["reference"], *s.get("fem", [])]},
+            "ifenn": {r: f"results/ifenn/{r}" for s in setups for r in s.get("ifenn", [])}}
+
+
 def speed_accuracy_inputs(wildcards):
-    runs = config["speed_accuracy"].values()
-    return sorted({f"results/fem/{r}/history.csv" for s in runs for r in [s["reference"], *s.get("fem", [])]}
-                  | {f"results/ifenn/{r}/history.csv" for s in runs for r in s.get("ifenn", [])})
+    return sorted(f"{d}/{name}" for dirs in speed_accuracy_dirs().values() for d in dirs.values() for name in ("history.csv", "spec.json"))
 
 
 PROCESS_ZONE_PAIRS = process_zone_pairs(config)
@@ -125,10 +136,23 @@ def whole_path_runs():
     return {run: config["ifenn_runs"][run]["fem_run"] for run in config["whole_path"]["runs"]}
 
 
+def whole_path_dirs():
+    """Whole-path IFENN run -> its FEM run's name and both run directories."""
+    return {run: {"fem_run": fem, "fem_dir": f"results/fem/{fem}", "ifenn_dir": f"results/ifenn/{run}"}
+            for run, fem in whole_path_runs().items()}
+
+
+def whole_path_network_cases():
+    """The pre-nucleation replay's runs: spec, FEM fields, the network and the run's history."""
+    return {run: {"spec": f"results/ifenn/{run}/spec.json", "fem_fields": f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",
+                  "model": "results/picnn/model.pt", "history": f"results/ifenn/{run}/history.csv"}
+            for run in config["whole_path"].get("network_runs", [])}
+
+
 def whole_path_inputs(wildcards):
     """FEM and whole-path histories; for the network replay the spec, the FEM fields and the network."""
     setup = config["whole_path"]
-    paths = {f"results/fem/{fem}/history.csv" for fem in whole_path_runs().values()}
+    paths = {f"results/fem/{fem}/{name}" for fem in whole_path_runs().values() for name in ("history.csv", "spec.json")}
     paths |= {f"results/ifenn/{run}/history.csv" for run in setup["runs"]}
     for run in setup.get("network_runs", []):
         paths |= {f"results/ifenn/{run}/spec.json", f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",

@@ -3,12 +3,13 @@
 
 rule accuracy_table:
     input:
-        ifenn=expand("results/ifenn/{run}/fields.h5", run=config["ifenn_runs"]),
-        fem=lambda w: sorted({f"results/fem/{r['fem_run']}/fields.h5" for r in config["ifenn_runs"].values()}),
+        ifenn=expand("results/ifenn/{run}/{name}", run=config["ifenn_runs"], name=("fields.h5", "history.csv")),
+        fem=lambda w: sorted({f"results/fem/{r['fem_run']}/{name}" for r in config["ifenn_runs"].values()
+                              for name in ("fields.h5", "history.csv", "spec.json")}),
     output:
         report("results/tables/accuracy.csv", caption="../report/accuracy.rst", category="Tables"),
     params:
-        runs={name: run["fem_run"] for name, run in config["ifenn_runs"].items()},
+        runs=run_pairs(),
         material=config["material"],
     conda:
         "../envs/ifenn.yaml"
@@ -25,7 +26,7 @@ rule timing_table:
     output:
         report("results/tables/timing.csv", caption="../report/timing.rst", category="Tables"),
     params:
-        runs={name: run["fem_run"] for name, run in config["ifenn_runs"].items()},
+        runs=run_pairs(),
     conda:
         "../envs/ifenn.yaml"
     log:
@@ -40,7 +41,8 @@ rule process_zone_table:
     output:
         report("results/tables/process_zone.csv", caption="../report/process_zone.rst", category="Tables"),
     params:
-        pairs=PROCESS_ZONE_PAIRS,
+        pairs={zone: {"full_run": full, "zone_dir": f"results/ifenn/{zone}", "full_dir": f"results/ifenn/{full}"}
+               for zone, full in PROCESS_ZONE_PAIRS.items()},
     conda:
         "../envs/ifenn.yaml"
     log:
@@ -56,6 +58,9 @@ rule speed_accuracy:
     output:
         table=report("results/tables/speed_accuracy.csv", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
         figure=report("results/figures/speed_accuracy.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
+    params:
+        setups=config["speed_accuracy"],
+        run_dirs=lambda w: speed_accuracy_dirs(),
     conda:
         "../envs/ifenn.yaml"
     log:

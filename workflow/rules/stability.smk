@@ -47,6 +47,8 @@ rule stability_table:
         expand("results/stability/{cell}/status.json", cell=STABILITY_CELLS),
     output:
         report("results/tables/stability.csv", caption="../report/stability.rst", category="Stability"),
+    params:
+        cell_root=lambda w, input: os.path.dirname(os.path.dirname(input[0])),  # results/stability/CELL/status.json
     conda:
         "../envs/ifenn.yaml"
     log:

@@ -12,10 +12,9 @@ rule whole_path_table:
         network=report("results/tables/pre_nucleation.csv", caption="../report/whole_path.rst", category="Whole load path"),
         figure=report("results/figures/whole_path.png", caption="../report/whole_path.rst", category="Whole load path"),
     params:
-        runs=lambda w: whole_path_runs(),
-        network_runs=lambda w: config["whole_path"].get("network_runs", []),
+        runs=lambda w: whole_path_dirs(),
+        network_cases=lambda w: whole_path_network_cases(),
         targets=lambda w: config["whole_path"]["targets"],
-        switch_phi_max=config["ifenn"]["switch_phi_max"],
     threads: 1
     conda:
         "../envs/ifenn.yaml"

@@ -5,6 +5,6 @@ from ifenn.io import write_csv
 from ifenn.metrics import accuracy
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
-rows = [{"run": run, "fem_run": fem_run, **accuracy(f"results/fem/{fem_run}", f"results/ifenn/{run}", snakemake.params.material)}
-        for run, fem_run in snakemake.params.runs.items()]
+rows = [{"run": run, "fem_run": where["fem_run"], **accuracy(where["fem_dir"], where["ifenn_dir"], snakemake.params.material)}
+        for run, where in snakemake.params.runs.items()]
 write_csv(snakemake.output[0], pd.DataFrame(rows))

@@ -5,6 +5,6 @@ from ifenn.io import write_csv
 from ifenn.metrics import process_zone_agreement
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
-rows = [{"run": zone, "full_run": full, **process_zone_agreement(f"results/ifenn/{zone}", f"results/ifenn/{full}")}
-        for zone, full in snakemake.params.pairs.items()]
+rows = [{"run": zone, "full_run": where["full_run"], **process_zone_agreement(where["zone_dir"], where["full_dir"])}
+        for zone, where in snakemake.params.pairs.items()]
 write_csv(snakemake.output[0], pd.DataFrame(rows))

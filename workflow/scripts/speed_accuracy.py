@@ -6,6 +6,6 @@ from ifenn.plots import speed_accuracy_figure
 from ifenn.speed_accuracy import speed_accuracy_table
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
-table = speed_accuracy_table(snakemake.config, "results")
+table = speed_accuracy_table(snakemake.params.setups, snakemake.params.run_dirs)
 write_csv(snakemake.output.table, table)
 speed_accuracy_figure(table, snakemake.output.figure, pd.read_csv(snakemake.input.benchmark))

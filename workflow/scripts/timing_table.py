@@ -3,11 +3,11 @@ import pandas as pd
 
 from ifenn.io import write_csv
 from ifenn.metrics import timing
+from ifenn.run_files import read_history
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 rows = []
-for run, fem_run in snakemake.params.runs.items():
-    fem = pd.read_csv(f"results/fem/{fem_run}/history.csv")
-    ifenn = pd.read_csv(f"results/ifenn/{run}/history.csv")
-    rows += [{"run": run, "fem_run": fem_run, **row} for row in timing(fem, ifenn)]
+for run, where in snakemake.params.runs.items():
+    fem, ifenn = read_history(where["fem_dir"]), read_history(where["ifenn_dir"])
+    rows += [{"run": run, "fem_run": where["fem_run"], **row} for row in timing(fem, ifenn)]
 write_csv(snakemake.output[0], pd.DataFrame(rows))

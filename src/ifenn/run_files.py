@@ -1,0 +1,130 @@
+"""The files of a run directory: each format is written and read here, and nowhere else.
+
+    spec.json        the run's resolved description (:func:`ifenn.config.fem_run_spec`,
+                     :func:`~ifenn.config.ifenn_run_spec`): every option the run used
+    history.csv      one row per increment (:data:`ifenn.solver.HISTORY_COLUMNS` and the
+                     phase-field step's own columns)
+    fields.h5        per saved increment a group ``increment_NNNNNN`` (attrs ``u``,
+                     ``increment``) holding the pixel maps ``history`` and ``phase_field_gp``
+                     (ny_px, nx_px), the nodal ``phase_field`` (n_nodes,) and ``displacement``
+                     (n_nodes, 2) in mesh-file order; root attrs: the pixel grid (``x0``, ``y0``,
+                     ``h_px``, ``nx_px``, ``ny_px``), ``run``, ``spec_hash`` and
+                     ``switch_increment`` (-1: the phi threshold was never reached)
+    provenance.json  spec hash, software versions, wall time, and what the run adds
+    status.json      a stability cell's outcome: ``status`` (ok / failed), ``error``, ``wall_s``
+
+Every write is atomic (:func:`ifenn.io.atomic_path`): a file that exists is complete.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+
+from .io import atomic_path, write_csv, write_json
+
+SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.h5", "provenance.json", "status.json"
+#: the datasets of a saved increment; the first two are the pixel maps
+FIELD_KEYS = ("history", "phase_field_gp", "phase_field", "displacement")
+MAP_KEYS = FIELD_KEYS[:2]
+#: the pixel grid's root attributes
+GRID_ATTRS = ("x0", "y0", "h_px", "nx_px", "ny_px")
+
+
+def _group(increment: int) -> str:
+    return f"increment_{int(increment):06d}"
+
+
+def _increment(group: str) -> int:
+    return int(group.split("_")[1])
+
+
+# --------------------------------------------------------------------------- fields.h5
+def write_fields(path: str | Path, attrs: dict, states: Iterable[dict]) -> None:
+    """fields.h5 from root ``attrs`` and ``states`` (dicts with ``increment``, ``u`` and the
+    FIELD_KEYS arrays; a nodal phase field of shape (n, 1) is stored as (n,))."""
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as h5:
+        h5.attrs.update(attrs)
+        for state in states:
+            group = h5.create_group(_group(state["increment"]))
+            group.attrs.update({"u": float(state["u"]), "increment": int(state["increment"])})
+            for key in FIELD_KEYS:
+                values = np.asarray(state[key])
+                group.create_dataset(key, data=values[:, 0] if key == "phase_field" and values.ndim == 2 else values,
+                                     compression="gzip")
+
+
+def fields_attrs(path: str | Path) -> dict:
+    """The root attributes of a fields.h5."""
+    with h5py.File(path, "r") as h5:
+        return dict(h5.attrs)
+
+
+def saved_increments(path: str | Path) -> list[int]:
+    """The increments a fields.h5 holds, ascending."""
+    with h5py.File(path, "r") as h5:
+        return sorted(_increment(g) for g in h5)
+
+
+def read_states(path: str | Path, increments: Iterable[int] | None = None, keys: Iterable[str] = FIELD_KEYS,
+                after: int | None = None) -> list[dict]:
+    """Saved states of a fields.h5, ascending: dicts with ``increment``, ``u`` and ``keys``.
+    ``increments``: exactly these (KeyError naming the saved ones if one is missing); else all,
+    or those after ``after``."""
+    keys = tuple(keys)
+    with h5py.File(path, "r") as h5:
+        saved = sorted(_increment(g) for g in h5)
+        if increments is not None:
+            wanted = [int(i) for i in increments]
+            missing = [i for i in wanted if i not in saved]
+            if missing:
+                raise KeyError(f"{path} has no fields for increments {missing}; saved: {saved}")
+        else:
+            wanted = [i for i in saved if after is None or i > after]
+        states = []
+        for increment in wanted:
+            group = h5[_group(increment)]
+            states.append({"increment": increment, "u": float(group.attrs["u"]), **{key: group[key][()] for key in keys}})
+        return states
+
+
+def read_phase_field_maps(path: str | Path) -> tuple[dict, dict]:
+    """{increment: (u, phase_field_gp map)} and the root attrs of a fields.h5."""
+    maps = {s["increment"]: (s["u"], s["phase_field_gp"]) for s in read_states(path, keys=("phase_field_gp",))}
+    return maps, fields_attrs(path)
+
+
+# --------------------------------------------------------------------------- the others
+def read_history(run_dir: str | Path) -> pd.DataFrame:
+    return pd.read_csv(Path(run_dir) / HISTORY)
+
+
+def write_history(run_dir: str | Path, frame: pd.DataFrame) -> None:
+    write_csv(Path(run_dir) / HISTORY, frame)
+
+
+def read_spec(path: str | Path) -> dict:
+    """A spec.json: the file itself, or the run directory that holds it."""
+    path = Path(path)
+    return json.loads((path / SPEC if path.is_dir() else path).read_text())
+
+
+def write_spec(path: str | Path, spec: dict) -> None:
+    write_json(path, spec)
+
+
+def read_status(run_dir: str | Path) -> dict:
+    return json.loads((Path(run_dir) / STATUS).read_text())
+
+
+def write_status(run_dir: str | Path, status: dict) -> None:
+    write_json(Path(run_dir) / STATUS, status)
+
+
+def write_provenance(run_dir: str | Path, record: dict) -> None:
+    write_json(Path(run_dir) / PROVENANCE, record)
