@@ -1,4 +1,4 @@
-"""The whole increment, FEM against IFENN, with each displacement solver (issue 14): one process,
+"""The whole increment, FEM against IFENN, with each displacement solver: one process,
 one core, the propagation stage of snt1-II/snt2-II/snt3-II (config 'increment_benchmark').
 
 Every (method, solver) pair restarts from the same saved FEM state (the switch-over increment of
@@ -133,7 +133,7 @@ def increment_speed(specs: list[dict], solvers: dict[str, tuple[str, dict]], met
 
 def ratios(table: pd.DataFrame, solver: str) -> pd.DataFrame:
     """Per run: gamg / ``solver`` displacement time (FEM and IFENN), and FEM / IFENN increment time
-    with ``solver`` (the two speed targets of issue 14)."""
+    with ``solver``."""
     t = table.set_index(["run", "method", "displacement_solver"])
     out = []
     for run in table.run.unique():

@@ -1,12 +1,12 @@
 """PICNN accuracy against training wall time: the default preset and the paper's two.
 
-Trains on the history maps of the training increments (SPEC 4: snt1-I, increments 300 and
+Trains on the history maps of the training increments (snt1-I, increments 300 and
 310) and scores the prediction (no smoothing) against the FEM phi of the same increments:
 mean absolute error over all pixels and over crack pixels (FEM phi > 0.05), plus the error
 against the exact solution of the pixel equation the loss drives toward (the network's own
 target; it differs from FEM by the pixel stencil and the boundary padding).
 
-* process_zone (the default): trained for its full number of epochs.
+* tiles (the default): trained for its full number of epochs.
 * released (lr 1e-3, 5,000 full-image epochs) and text (lr 1e-4, 10,000): trained for a
   few hundred epochs only (--short-epochs); their wall time for the full schedule is
   extrapolated linearly from the measured time per epoch, their accuracy is the one
@@ -31,22 +31,15 @@ import pandas as pd
 
 from ifenn.config import REPO, load_config
 from ifenn.picnn import solve_pixel_equation
-from ifenn.training import PRESETS, resolve_settings, synthetic_history, train_picnn
-
-CRACK_PHI = 0.05  # FEM phi above which a pixel counts as a crack pixel
+from ifenn.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
 
 
 def read_fields(path: Path, increments: list[int]) -> tuple[float, list[np.ndarray], list[np.ndarray]]:
     """(h_px, history maps, FEM phi maps) of the given 1-based increments of a fields.h5."""
-    import h5py
+    from ifenn import run_files
 
-    with h5py.File(path, "r") as fields:
-        groups = [fields[f"increment_{i:06d}"] for i in increments]
-        return (
-            float(fields.attrs["h_px"]),
-            [g["history"][()] for g in groups],
-            [g["phase_field_gp"][()] for g in groups],
-        )
+    states = run_files.read_states(path, increments, keys=run_files.MAP_KEYS)
+    return float(run_files.fields_attrs(path)["h_px"]), [s["history"] for s in states], [s["phase_field_gp"] for s in states]
 
 
 def make_monitor(history_maps, reference_maps, exact_maps):
@@ -58,7 +51,7 @@ def make_monitor(history_maps, reference_maps, exact_maps):
             phi = model.predict(history)
             error = np.abs(phi - reference)
             row[f"mae_all_{k}"] = error.mean()
-            row[f"mae_crack_{k}"] = error[reference > CRACK_PHI].mean()
+            row[f"mae_crack_{k}"] = error[reference > SCORE_CRACK_PHI].mean()
             row[f"mae_pixel_exact_{k}"] = np.abs(phi - exact).mean()
             row[f"max_phi_{k}"] = phi.max()
         return row
@@ -74,7 +67,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--short-epochs", type=int, default=200, help="epochs run for released/text")
     parser.add_argument("--checkpoints", type=int, default=5, help="accuracy rows per preset")
-    parser.add_argument("--presets", nargs="+", default=["process_zone", "released", "text"], choices=list(PRESETS))
+    parser.add_argument("--presets", nargs="+", default=["tiles", "released", "text"], choices=list(PRESETS))
     parser.add_argument("--csv", type=Path, default=None, help="also write the table here")
     args = parser.parse_args()
 
@@ -92,11 +85,11 @@ def main() -> None:
     rows = []
     for preset in args.presets:
         settings = resolve_settings({"preset": preset})
-        full_epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "process_zone" else 0)
-        short = preset != "process_zone"
+        full_epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "tiles" else 0)
+        short = preset != "tiles"
         if short:
             settings["epochs"] = min(args.short_epochs, settings["epochs"])
-        run_epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "process_zone" else 0)
+        run_epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "tiles" else 0)
         capped = [np.minimum(h, settings["history_cap"]) for h in history_maps]
         exact = [solve_pixel_equation(h, Gc, lc, h_px, settings["laplacian_padding"]) for h in capped]
         reference = fem_maps if fem_maps is not None else exact
@@ -125,7 +118,7 @@ def main() -> None:
     print("mae_all / mae_crack: |phi - reference| over all pixels / pixels with reference phi > 0.05;")
     print("mae_pixel_exact: against the exact solution of the pixel equation; no smoothing.")
     for preset in args.presets:
-        if preset != "process_zone":
+        if preset != "tiles":
             n = resolve_settings({"preset": preset})["epochs"]
             print(
                 f"NOTE {preset}: only {min(args.short_epochs, n)} of its {n} epochs were run; "

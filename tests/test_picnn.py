@@ -78,7 +78,7 @@ def test_log_input_scaling_centres_the_half_broken_history():
 
 
 def test_zero_input_gives_one_half():
-    """No biases: H = 0 maps to phi = 0.5 exactly (SPEC 4), whatever the weights."""
+    """No biases: H = 0 maps to phi = 0.5 exactly, whatever the weights."""
     model = PICNN()
     np.testing.assert_array_equal(model.predict(np.zeros((9, 12))), 0.5)
 
@@ -176,7 +176,7 @@ def test_a_few_epochs_lower_the_loss(small_history):
 
 def test_process_zone_training_runs_and_lowers_the_loss(small_history):
     # the paper's loss throughout (warm-up = all epochs), so that its value can be compared
-    settings = dict(PRESETS["process_zone"], **TINY, tile_size=16, full_image_epochs=2, residual_scaling_warmup=17)
+    settings = dict(PRESETS["tiles"], **TINY, tile_size=16, full_image_epochs=2, residual_scaling_warmup=17)
     settings.update(process_zone_tiles=None, far_field_tiles=2, lr_final=1e-3)
     history = as_batch(np.minimum(small_history, 5e4)).float()
     torch.manual_seed(0)  # the initial weights of train_picnn(seed=0)
@@ -200,7 +200,7 @@ def test_settings_presets():
     assert resolve_settings({"preset": "released"})["lr"] == 1e-3
     text = resolve_settings({"preset": "text"})
     assert (text["lr"], text["epochs"], text["sampling"]) == (1e-4, 10000, "full")
-    assert resolve_settings({"preset": "process_zone", "epochs": 3})["epochs"] == 3
+    assert resolve_settings({"preset": "tiles", "epochs": 3})["epochs"] == 3
     with pytest.raises(KeyError):
         resolve_settings({"learning_rate": 1.0})
 
@@ -210,7 +210,7 @@ def test_save_load_roundtrip(tmp_path, small_history):
     torch.manual_seed(5)
     model = PICNN(padding="replicate", history_cap=1e5, input_scaling=InputScaling("log1p", 2.0))
     path = tmp_path / "picnn.pt"
-    extra = {"settings": resolve_settings({"preset": "process_zone"}), "training_increments": [300, 310]}
+    extra = {"settings": resolve_settings({"preset": "tiles"}), "training_increments": [300, 310]}
     save_picnn(model, path, h_px=H_PX, Gc=GC, lc=LC, config_hash="abc123", extra=extra)
     loaded, meta = load_picnn(path)
     np.testing.assert_array_equal(loaded.predict(small_history), model.predict(small_history))

@@ -1,4 +1,4 @@
-"""IFENN over the whole load path (issue 13) and the switch-over criterion: on the quick scene,
+"""IFENN over the whole load path and the switch-over criterion: on the quick scene,
 verified IFENN from the first increment reaches FEM's peak within a stated tolerance, and every
 IFENN run's provenance says which criterion fired and at which increment."""
 

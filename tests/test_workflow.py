@@ -82,7 +82,7 @@ def test_quick_profile_issue5_results(quick_workflow):
 
 
 def test_quick_profile_error_sources(quick_workflow):
-    """The error split (issue 12) has every source of every configured run; its parts add up to the
+    """The error split has every source of every configured run; its parts add up to the
     published step; replaying the published step on FEM's states lands near the whole run's error."""
     from ifenn.error_sources import PUBLISHED_PARTS, SOURCES
 

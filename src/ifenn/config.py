@@ -46,6 +46,31 @@ def load_config(*paths: str | Path) -> dict:
     return validate_config(config)
 
 
+def schema_defaults(section: str) -> dict:
+    """The schema's defaults of one ``$defs`` section (e.g. 'process_zone', 'verification'):
+    the classes that take those settings default to them, so each number is written once."""
+    return {key: sub["default"] for key, sub in _schema()["$defs"][section]["properties"].items() if "default" in sub}
+
+
+def schema_default(*keys: str):
+    """The schema's default of a configuration key, e.g. schema_default('ifenn', 'history_cap')."""
+    node = _schema()
+    for key in keys:
+        node = node["properties"][key]
+    return node["default"]
+
+
+def _schema() -> dict:
+    global _SCHEMA
+    if _SCHEMA is None:
+        with open(SCHEMA_PATH) as stream:
+            _SCHEMA = yaml.safe_load(stream)
+    return _SCHEMA
+
+
+_SCHEMA = None
+
+
 def _key_path(path) -> str:
     out = ""
     for part in path:
@@ -374,7 +399,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
     views = config.get("figures", {}).get("views_3d")
     if views and config.get("ifenn_runs", {}).get(views["run"], {}).get("fem_run") == run:
         save.add(views["increment"])
-    # the state an IFENN run switches over from at a given increment (issue 13)
+    # the state an IFENN run switches over from at a given increment
     for name, other in config.get("ifenn_runs", {}).items():
         criterion, increment = switch_over(config, name)
         if other["fem_run"] == run and criterion == "increment" and increment is not None:

@@ -11,7 +11,7 @@ When IFENN takes over is the run's ``switch_over`` criterion (config 'ifenn.swit
   says so (``switch_over.fired_at_first_increment``).
 - ``increment``: after FEM increment ``switch_increment`` (its state is saved by the FEM run).
 - ``start``: from the scene's initial state (u = 0, phi = 0, H = the initial history); IFENN
-  computes every increment and needs no FEM state (the whole-path runs, issue 13).
+  computes every increment and needs no FEM state (the whole-path runs).
 
 provenance.json of an IFENN run states which criterion fired and when (``switch_over``).
 

@@ -62,7 +62,7 @@ class FEMPhaseField:
 
 
 class PixelPhaseField:
-    """The IFENN phase-field step (SPEC section 5, steps 2-4):
+    """The IFENN phase-field step (steps 2-4 of the hybrid increment):
 
     H at Gauss points -> pixels, capped to [0, H_cap] -> inference (predictor + optional
     Gaussian smoothing) -> Gauss points, with irreversibility phi_gp = max(phi_gp, new).

@@ -1,4 +1,4 @@
-"""UFL expressions of the phase-field model (SPEC section 1): plane strain, small strain,
+"""UFL expressions of the phase-field model: plane strain, small strain,
 hybrid formulation (Ambati et al. 2015), AT2 crack surface density, spectral split."""
 
 from __future__ import annotations

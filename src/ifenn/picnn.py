@@ -1,6 +1,6 @@
 """Physics-informed CNN (PICNN) for the phase field: network, pixel physics, exact pixel solver.
 
-Conventions (SPEC sections 2 and 4):
+Conventions:
 
 * A pixel map is a float array of shape ``(ny_px, nx_px)``; row ``iy`` increases with y
   (row 0 is the bottom of the domain), column ``ix`` increases with x. Batches of maps have
@@ -33,6 +33,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ifenn.config import schema_default
 from ifenn.io import atomic_path
 
 #: Laplacian stencil K9* of the paper (section "PICNN training"); its weights sum to 3.
@@ -184,7 +185,7 @@ class InputScaling:
 DEFAULT_CHANNELS = (1, 24, 24, 24, 1)
 #: History cap H_cap of the paper, N/mm^2 (the config is the source of truth; this is
 #: only the constructor default).
-DEFAULT_HISTORY_CAP = 5.0e4
+DEFAULT_HISTORY_CAP = schema_default("ifenn", "history_cap")  # N/mm^2, the config schema's
 
 
 class PICNN(nn.Module):

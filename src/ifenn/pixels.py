@@ -1,4 +1,4 @@
-"""Gauss point <-> pixel maps (SPEC section 2).
+"""Gauss point <-> pixel maps.
 
 An nx x ny element mesh gives a (2 ny) x (2 nx) image with pixel size h_px = h / 2; each
 Gauss point maps to the pixel that contains it (floor of coordinate over h_px). Images are

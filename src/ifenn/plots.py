@@ -452,7 +452,7 @@ def error_sources_figure(sources, path) -> None:
 
 
 def whole_path_figure(pairs: dict, table, path) -> None:
-    """IFENN over the whole load path against FEM (issue 13). Per run (columns): the force curves
+    """IFENN over the whole load path against FEM. Per run (columns): the force curves
     of FEM and the whole-path run with FEM's peak and phi-threshold increment marked (top), and the
     verified step's work per increment (whole-image CG iterations, and the share of the image
     corrected) against u (bottom). ``pairs``: run -> (FEM history, IFENN history) DataFrames;

@@ -233,7 +233,7 @@ class FractureProblem:
         self.quadrature_points, _ = basix.make_quadrature(basix.CellType.quadrilateral, 2)
         self.q_dofs = self.Q.dofmap.list.array.reshape(-1, len(self.quadrature_points))
 
-        # Pixel grid = Gauss-point grid (SPEC section 2).
+        # Pixel grid = Gauss-point grid.
         gp_coordinates = fem.Expression(ufl.SpatialCoordinate(domain), self.quadrature_points).eval(self.local_cells)
         self.gauss_point_coordinates = gp_coordinates.reshape(len(self.local_cells), -1, 2)  # (cells, 4, 2), mm
         gp_coordinates = self.gauss_point_coordinates

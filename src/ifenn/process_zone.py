@@ -1,5 +1,5 @@
 """Inference of the pixel phase field: the whole image every step (the paper), or only the
-process zone (issue 5).
+process zone.
 
 Both engines map the capped history image H_c (ny, nx) to the smoothed prediction
 phi = G_sigma * N(H_c), where N is a local operator (the PICNN: an output pixel depends on
@@ -39,7 +39,11 @@ import time
 import numpy as np
 import scipy.ndimage
 
+from .config import schema_defaults
 from .pixels import box_area, box_within, grow_box
+
+#: the settings' defaults: those of the config schema ('ifenn.process_zone')
+_DEFAULTS = schema_defaults("process_zone")
 
 
 def _smoothing_radius(sigma: float | None, truncate: float) -> int:
@@ -80,9 +84,9 @@ class ProcessZoneInference:
 
     name = "process_zone"
 
-    def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = 1e-3,
-                 refresh_every: int = 100, full_fraction: float = 0.3, local_scale: float = 90.0,
-                 shape: tuple[int, int] | None = None):
+    def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = _DEFAULTS["tolerance"],
+                 refresh_every: int = _DEFAULTS["refresh_every"], full_fraction: float = _DEFAULTS["full_fraction"],
+                 local_scale: float = 90.0, shape: tuple[int, int] | None = None):
         if not hasattr(evaluator, "network_state"):
             raise ValueError("process-zone inference needs the local PICNN in its orbit evaluation (ifenn evaluation: orbit), "
                              "not a global pixel solve or the convolution path")

@@ -1,4 +1,4 @@
-"""Stability where the methods fail (issue 5): a sweep of load step, lc/h and IFENN options on
+"""Stability where the methods fail: a sweep of load step, lc/h and IFENN options on
 a small single-notch scene, both methods, each cell classified from its metrics.
 
 Cells: FEM and IFENN runs on the sweep scene (config 'stability.scene') with

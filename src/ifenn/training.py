@@ -1,4 +1,4 @@
-"""Training and scoring of the PICNN (SPEC section 4).
+"""Training and scoring of the PICNN.
 
 The loss is the pixel residual of the phase-field equation (``ifenn.picnn.residual``); no
 labels are used. Three named presets (``PRESETS``):
@@ -6,7 +6,7 @@ labels are used. Three named presets (``PRESETS``):
 * ``"released"``: the authors' released script: Adam, lr 1e-3, 5,000 epochs of full images,
   zero padding (network and Laplacian), unscaled input, the plain residual norm.
 * ``"text"``: the paper's text: lr 1e-4, 10,000 epochs, otherwise as "released".
-* ``"process_zone"`` (the project default): the paper's argument that only the fracture
+* ``"tiles"`` (the project default): the paper's argument that only the fracture
   process zone matters, made cheap, plus three changes that make the far field learnable:
 
   - Tiles. The network is local (receptive radius 8 pixels, 9 with the Laplacian), so the
@@ -33,14 +33,14 @@ dict overrides both):
 
 lr : Adam learning rate at the start (1e-3).
 lr_final : learning rate at the last epoch, cosine decay from lr; None = constant (None).
-epochs : optimiser steps, on tile batches ("process_zone") or full images ("full") (5000).
-sampling : "full" (every step sees every pixel of every map) or "process_zone" ("full").
+epochs : optimiser steps, on tile batches ("tiles") or full images ("full") (5000).
+sampling : "full" (every step sees every pixel of every map) or "tiles": tiles around the process zone and a few far-field ones ("full").
 padding : padding of the network's convolutions ("zeros", as the released script).
 laplacian_padding : padding of the Laplacian in the loss: "zeros" (released script, phi = 0
     beyond the image) or "replicate" (zero flux, as the FEM) ("zeros").
 input_scaling, input_reference, input_centre : ``ifenn.picnn.InputScaling`` kind ("none"),
     reference (1.0 N/mm^2) and centre (N/mm^2; None = Gc / (2 lc)).
-history_cap : H_cap, N/mm^2; the loss uses the capped history too (5e4).
+history_cap : H_cap, N/mm^2; the loss uses the capped history too (the config's ifenn.history_cap).
 channels, kernel_size : the architecture ((1, 24, 24, 24, 1), 5).
 optimiser : "adam", the only one; a key so that the config names it ("adam").
 residual_scaling : "none" (the paper: R in N/mm^2) or "reaction" (R / (Gc/lc + 2H)^p, an
@@ -48,7 +48,7 @@ residual_scaling : "none" (the paper: R in N/mm^2) or "reaction" (R / (Gc/lc + 2
 residual_scaling_exponent : p of "reaction" (1.0).
 residual_scaling_warmup : epochs at the start that use residual_scaling "none"; Adam is
     restarted when the scaling switches (0).
-tile_size : interior size of a tile, pixels ("process_zone" only) (46).
+tile_size : interior size of a tile, pixels ("tiles" only) (46).
 process_zone_history : a tile is in the process zone if H >= this (N/mm^2) within
     ``process_zone_margin`` of it; None = Gc/lc (None).
 process_zone_margin : mm; None = 2 lc (None).
@@ -72,7 +72,7 @@ import pandas as pd
 import torch
 from tqdm.auto import tqdm
 
-from ifenn.picnn import PICNN, InputScaling, residual
+from ifenn.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
 
 DEFAULT_SETTINGS: dict = {
     "lr": 1e-3,
@@ -84,7 +84,7 @@ DEFAULT_SETTINGS: dict = {
     "input_scaling": "none",
     "input_reference": 1.0,
     "input_centre": None,
-    "history_cap": 5.0e4,
+    "history_cap": DEFAULT_HISTORY_CAP,
     "channels": (1, 24, 24, 24, 1),
     "kernel_size": 5,
     "optimiser": "adam",
@@ -105,11 +105,11 @@ DEFAULT_SETTINGS: dict = {
 PRESETS: dict[str, dict] = {
     "released": {"lr": 1e-3, "epochs": 5000, "sampling": "full"},
     "text": {"lr": 1e-4, "epochs": 10000, "sampling": "full"},
-    "process_zone": {
+    "tiles": {
         "lr": 1e-3,
         "lr_final": 1e-5,
         "epochs": 1000,
-        "sampling": "process_zone",
+        "sampling": "tiles",
         "padding": "replicate",
         "laplacian_padding": "replicate",
         "input_scaling": "log",
@@ -125,6 +125,9 @@ PRESETS: dict[str, dict] = {
 }
 
 
+SAMPLINGS = ("full", "tiles")
+
+
 def resolve_settings(settings: dict | None = None) -> dict:
     """DEFAULT_SETTINGS, overridden by ``settings["preset"]`` (if any), then by ``settings``."""
     settings = dict(settings or {})
@@ -137,6 +140,8 @@ def resolve_settings(settings: dict | None = None) -> dict:
     if unknown:
         raise KeyError(f"unknown PICNN training settings: {sorted(unknown)}")
     resolved.update(settings)
+    if resolved["sampling"] not in SAMPLINGS:
+        raise KeyError(f"PICNN training setting 'sampling': {resolved['sampling']!r}; allowed: {list(SAMPLINGS)}")
     return resolved
 
 
@@ -291,7 +296,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
     capped = np.minimum(np.maximum(np.stack(history_maps), 0.0), s["history_cap"])
     full_history = torch.as_tensor(capped[:, None], dtype=dtype)
 
-    if s["sampling"] == "process_zone":
+    if s["sampling"] == "tiles":
         pz_history = s["process_zone_history"] if s["process_zone_history"] is not None else Gc / lc
         pz_margin = s["process_zone_margin"] if s["process_zone_margin"] is not None else 2 * lc
         tiles, in_zone = make_tiles(
@@ -308,11 +313,11 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
 
     optimiser = torch.optim.Adam(model.parameters(), lr=s["lr"])
     log = []
-    n_total = s["epochs"] + (s["full_image_epochs"] if s["sampling"] == "process_zone" else 0)
+    n_total = s["epochs"] + (s["full_image_epochs"] if s["sampling"] == "tiles" else 0)
     bar = tqdm(total=n_total, disable=not progress, desc="PICNN training", unit="epoch")
     start = time.perf_counter()
     for epoch in range(n_total):
-        crop_stage = s["sampling"] == "process_zone" and epoch < s["epochs"]
+        crop_stage = s["sampling"] == "tiles" and epoch < s["epochs"]
         lr = _learning_rate(s, min(epoch, s["epochs"] - 1))
         for group in optimiser.param_groups:
             group["lr"] = lr
@@ -356,8 +361,9 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
 # ---------------------------------------------------------------------------------------
 # Scoring against FEM
 # ---------------------------------------------------------------------------------------
-#: Defaults of score_picnn: phi above which a pixel is "crack" / "fully broken".
-CRACK_PHI = 0.05
+#: Defaults of score_picnn: reference phi above which a pixel is scored as "crack" (any damage
+#: worth scoring: 0.05, not the crack set {phi >= 0.5} of ifenn.metrics.CRACK_PHI) / "fully broken".
+SCORE_CRACK_PHI = 0.05
 BROKEN_PHI = 0.9
 
 
@@ -365,7 +371,7 @@ def score_picnn(
     model: PICNN,
     history_maps: list[np.ndarray],
     fem_phi_maps: list[np.ndarray],
-    crack_phi: float = CRACK_PHI,
+    crack_phi: float = SCORE_CRACK_PHI,
     broken_phi: float = BROKEN_PHI,
     smoothing=None,
 ) -> list[dict]:
@@ -412,7 +418,7 @@ def synthetic_history(
     tip_peak: float = 800.0,
     far_field: tuple[float, float, float] = (1.0, 3.0, 2.0),
     far_field_length: float = 0.3,
-    history_cap: float = 5.0e4,
+    history_cap: float = DEFAULT_HISTORY_CAP,
 ) -> np.ndarray:
     """A snt-like history map (N/mm^2), shape (n_px, n_px), square domain centred at 0.
 

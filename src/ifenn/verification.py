@@ -73,10 +73,14 @@ import numpy as np
 import scipy.fft
 import scipy.ndimage
 
+from .config import schema_defaults
 from .picnn import LAPLACIAN_K9_STAR
 from .pixels import Box, box_area, grow_box
 
 log = logging.getLogger(__name__)
+
+#: the settings' defaults: those of the config schema ('ifenn.verification')
+_DEFAULTS = schema_defaults("verification")
 
 
 def _kernel():
@@ -315,8 +319,9 @@ class VerifiedInference:
     #: image instead (its fast transform is exact there; the boxes would cost about as much)
     GLOBAL_FRACTION = 0.5
 
-    def __init__(self, inference, equation: PixelEquation, tolerance: float = 1e-3, margin_lc: float = 6.0,
-                 max_rounds: int = 6, solve_fraction: float = 0.5, warm_start: str = "network"):
+    def __init__(self, inference, equation: PixelEquation, tolerance: float = _DEFAULTS["tolerance"],
+                 margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
+                 solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"]):
         if warm_start not in WARM_STARTS:
             raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
         if warm_start != "previous" and inference is None:

@@ -1,4 +1,4 @@
-"""IFENN over the whole load path (issue 13): a run that switches over at the start (config
+"""IFENN over the whole load path: a run that switches over at the start (config
 ``switch_over: start``) against the FEM run of the same scene and schedule.
 
 Both runs take the same loads from u = 0; neither copies the other. What is compared:

@@ -1,4 +1,4 @@
-"""The phase-field step over the whole run (issue 13): FEM against whole-path IFENN (the verified
+"""The phase-field step over the whole run: FEM against whole-path IFENN (the verified
 step from the first increment), on the same core in the same process.
 
 For each whole-path run (config 'whole_run_benchmark.runs', ``switch_over: start``) two runs

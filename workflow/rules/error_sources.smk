@@ -1,4 +1,4 @@
-# Where the post-switch error of IFENN comes from (issue 12): every source replayed on the FEM
+# Where the post-switch error of IFENN comes from: every source replayed on the FEM
 # states saved after the switch-over (config 'error_sources'; ifenn.error_sources).
 
 

@@ -1,4 +1,4 @@
-# Stability where the methods fail (issue 5): a sweep of FEM and IFENN cells on a small
+# Stability where the methods fail: a sweep of FEM and IFENN cells on a small
 # scene (config 'stability'), each classified automatically; see ifenn.stability.
 
 

@@ -1,4 +1,4 @@
-# IFENN over the whole load path (issue 13): the whole-path runs (switch_over 'start') against the
+# IFENN over the whole load path: the whole-path runs (switch_over 'start') against the
 # FEM run of the same scene and schedule, what the network makes of the pre-nucleation damage, and
 # the phase-field step over the whole run, FEM against whole-path IFENN (ifenn.whole_path,
 # ifenn.whole_run_benchmark).
