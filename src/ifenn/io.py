@@ -1,9 +1,10 @@
-"""Files: atomic writes, provenance records."""
+"""Files: atomic writes, provenance records, the log of a workflow step, progress bars."""
 
 from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import os
 import platform
 import sys
@@ -50,3 +51,23 @@ def provenance(spec_hash: str, wall_s: float, **extra) -> dict:
     """A small record written beside every result: what, with what, how long."""
     return {"spec_hash": spec_hash, "wall_time_s": round(wall_s, 3), "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "versions": software_versions(), **extra}
+
+
+def log_to(path: str | Path):
+    """Send this process's logging (INFO and up) and its stderr (warnings, tracebacks, progress
+    bars) to ``path``, line-buffered: the ``log:`` file of a Snakemake rule. Returns the stream."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stream = open(path, "w", buffering=1)  # noqa: SIM115 (open for the rest of the process)
+    sys.stderr = stream
+    logging.basicConfig(stream=stream, level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s", force=True)
+    return stream
+
+
+def progress_bar(**options):
+    """A tqdm bar that refreshes twice a second on a terminal and every 30 s into a file (a
+    rule's log), so a log holds a few lines per minute, not one per update."""
+    from tqdm import tqdm
+
+    interactive = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    return tqdm(mininterval=0.5 if interactive else 30.0, **options)

@@ -70,8 +70,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import torch
-from tqdm.auto import tqdm
 
+from ifenn.io import progress_bar
 from ifenn.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
 
 DEFAULT_SETTINGS: dict = {
@@ -314,7 +314,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
     optimiser = torch.optim.Adam(model.parameters(), lr=s["lr"])
     log = []
     n_total = s["epochs"] + (s["full_image_epochs"] if s["sampling"] == "tiles" else 0)
-    bar = tqdm(total=n_total, disable=not progress, desc="PICNN training", unit="epoch")
+    bar = progress_bar(total=n_total, disable=not progress, desc="PICNN training", unit="epoch")
     start = time.perf_counter()
     for epoch in range(n_total):
         crop_stage = s["sampling"] == "tiles" and epoch < s["epochs"]

@@ -1,9 +1,11 @@
 """Adapter: one FEM/IFENN pair -> ifenn.plots.comparison_figure."""
 import pandas as pd
 
+from ifenn.io import log_to
 from ifenn.plots import comparison_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 i, options = snakemake.input, snakemake.params.options
 verified = "verified_history" in i.keys()
 comparison_figure(pd.read_csv(i.fem_history), pd.read_csv(i.ifenn_history), i.fem_fields, i.ifenn_fields, snakemake.output[0],

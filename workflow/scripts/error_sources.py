@@ -1,12 +1,10 @@
 """Adapter: IFENN runs, their FEM states and the network -> ifenn.error_sources tables and figure."""
-import logging
 import os
-import sys
+
+from ifenn.io import log_to
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
-log_stream = open(snakemake.log[0], "w", buffering=1)  # noqa: SIM115 (open for the whole script)
-sys.stderr = log_stream
-logging.basicConfig(stream=log_stream, level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+log_to(snakemake.log[0])
 os.environ.setdefault("OMP_NUM_THREADS", str(snakemake.threads))
 
 import torch  # noqa: E402

@@ -1,9 +1,11 @@
 """Adapter: FEM and IFENN histories -> ifenn.plots.force_displacement_figure (PNG)."""
 import pandas as pd
 
+from ifenn.io import log_to
 from ifenn.plots import force_displacement_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 run, fem_run = snakemake.wildcards.run, snakemake.params.fem_run
 ifenn = pd.read_csv(snakemake.input.ifenn)
 switch_u = ifenn.u[ifenn.hybrid_active == 1].min()

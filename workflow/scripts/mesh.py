@@ -1,5 +1,7 @@
 """Adapter: scene config -> ifenn.mesh.build_mesh -> XDMF/HDF5 + JSON metadata."""
+from ifenn.io import log_to
 from ifenn.mesh import build_mesh, write_mesh
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 write_mesh(build_mesh(snakemake.params.scene), snakemake.output.xdmf)

@@ -1,7 +1,9 @@
 """Adapter: timing table -> ifenn.plots.phase_field_time_figure."""
 import pandas as pd
 
+from ifenn.io import log_to
 from ifenn.plots import phase_field_time_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 phase_field_time_figure(pd.read_csv(snakemake.input.timing), snakemake.params.cases, snakemake.output[0])

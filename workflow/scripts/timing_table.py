@@ -1,11 +1,12 @@
 """Adapter: FEM and IFENN histories -> ifenn.metrics.timing, rows per run and method."""
 import pandas as pd
 
-from ifenn.io import write_csv
+from ifenn.io import log_to, write_csv
 from ifenn.metrics import timing
 from ifenn.run_files import read_history
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 rows = []
 for run, where in snakemake.params.runs.items():
     fem, ifenn = read_history(where["fem_dir"]), read_history(where["ifenn_dir"])

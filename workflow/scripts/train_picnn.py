@@ -5,12 +5,13 @@ import time
 import pandas as pd
 
 from ifenn.config import spec_hash
-from ifenn.io import provenance, write_csv, write_json
+from ifenn.io import log_to, provenance, write_csv, write_json
 from ifenn.picnn import save_picnn
 from ifenn.training import resolve_settings, score_picnn, train_picnn
 from ifenn.training_data import read_training_data
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 spec = json.loads(snakemake.params.spec)
 data = read_training_data(snakemake.input.data)
 settings = resolve_settings({"preset": spec["preset"], **spec["settings"]})

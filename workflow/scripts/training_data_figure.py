@@ -1,6 +1,8 @@
 """Adapter: training data -> ifenn.plots.training_data_figure."""
+from ifenn.io import log_to
 from ifenn.plots import training_data_figure
 from ifenn.training_data import read_training_data
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 training_data_figure(read_training_data(snakemake.input[0]), snakemake.output[0])

@@ -1,10 +1,12 @@
 """Adapter: training data, model, loss log -> ifenn.plots.training_figure."""
 import pandas as pd
 
+from ifenn.io import log_to
 from ifenn.picnn import load_picnn
 from ifenn.plots import training_figure
 from ifenn.training_data import read_training_data
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
+log_to(snakemake.log[0])
 model, _ = load_picnn(snakemake.input.model)
 training_figure(read_training_data(snakemake.input.data), model, pd.read_csv(snakemake.input.loss), snakemake.output[0])

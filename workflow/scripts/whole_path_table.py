@@ -1,11 +1,8 @@
 """Adapter: whole-path IFENN and FEM run folders -> ifenn.whole_path tables and figure."""
-import logging
-import sys
+from ifenn.io import log_to
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
-log_stream = open(snakemake.log[0], "w", buffering=1)  # noqa: SIM115 (open for the whole script)
-sys.stderr = log_stream
-logging.basicConfig(stream=log_stream, level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+log_to(snakemake.log[0])
 
 import pandas as pd  # noqa: E402
 
