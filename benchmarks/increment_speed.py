@@ -77,7 +77,7 @@ class Case:
     def advance(self) -> None:
         increment = self.last + 1
         u = self.run.loads.next_load(increment, self.u_previous)
-        row = self.run._increment(increment, u, self.u_previous)
+        row = self.run.solve_increment(increment, u, self.u_previous)
         self.rows.append(row)
         self.iterations.append(self.problem.displacement_iterations)
         self.last, self.u_previous = increment, row["u"]

@@ -66,7 +66,7 @@ def test_fully_cracked_band_gives_the_1d_at2_profile(paper_config, tmp_path, lc_
     values = np.zeros_like(problem.history.x.array)
     values[problem.q_dofs] = np.where(np.abs(gp_x) < h, 1.0e8, 0.0)
     problem.history.x.array[:] = values
-    step.step()
+    step.solve()
     x = problem.W.tabulate_dof_coordinates()[:, 0]
     phi = problem.phase_field.x.array
     assert phi[np.abs(x) < 1e-12].min() > 0.99
@@ -81,7 +81,7 @@ def test_homogeneous_history_gives_the_local_solution(paper_config, tmp_path):
     problem, step, _ = _strip_problem(paper_config, tmp_path, 0.05, 4)
     Gc, lc, H = paper_config["material"]["Gc"], 0.05, 37.0
     problem.history.x.array[:] = H
-    step.step()
+    step.solve()
     np.testing.assert_allclose(problem.phase_field.x.array, 2 * H / (Gc / lc + 2 * H), rtol=1e-8)
     np.testing.assert_allclose(problem.phase_field_gp.x.array, 2 * H / (Gc / lc + 2 * H), rtol=1e-8)
 

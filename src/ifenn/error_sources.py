@@ -207,7 +207,7 @@ class Replay:
         for iteration in range(1, self.stagger_max_iterations + 1):  # noqa: B007 (returned)
             p.solve_displacement(state["u"])
             p.update_history()
-            self.fem_step.step()
+            self.fem_step.solve()
             current = p.pixels_from_gauss_points(p.phase_field_gp)
             if one_more is None:
                 one_more = current

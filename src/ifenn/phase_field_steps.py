@@ -1,5 +1,5 @@
 """Phase-field steps: what replaces phi after the history update, inside one staggered
-iteration. The staggered loop calls ``step()``; each step updates
+iteration. The staggered loop calls ``solve()``; each step updates
 ``problem.phase_field_gp`` (and, for FEM, the nodal ``problem.phase_field``).
 
 FEMPhaseField solves -Gc lc Lap(phi) + (Gc/lc + 2H) phi = 2H with Q1 elements. The
@@ -7,6 +7,8 @@ hybrid IFENN steps (PICNN, exact pixel solver) plug into the same interface.
 """
 
 from __future__ import annotations
+
+from typing import Protocol
 
 import numpy as np
 import ufl
@@ -16,6 +18,22 @@ from petsc4py import PETSc
 
 from . import physics
 from .problem import FractureProblem, check_converged, configure_ksp
+
+
+class PhaseFieldStep(Protocol):
+    """What the staggered loop needs of a phase-field step."""
+
+    name: str
+    #: history.csv columns the step adds, and their values for the current increment (summed
+    #: over its staggered iterations; the loop zeroes them at the start of each increment)
+    extra_columns: tuple[str, ...]
+    timings: dict
+
+    def solve(self) -> int:
+        """Replace phi from the current history (``problem.phase_field_gp``, and the nodal field
+        where the step has one); returns the solver's iterations (0 if none)."""
+
+    def phase_field_max(self) -> float: ...
 
 
 class FEMPhaseField:
@@ -40,7 +58,7 @@ class FEMPhaseField:
         self._at_gauss_points = fem.Expression(problem.phase_field, problem.quadrature_points)
         self.timings: dict = {}
 
-    def step(self) -> int:
+    def solve(self) -> int:
         """Assemble with the current history, solve for nodal phi, evaluate it at the Gauss
         points. Returns the Krylov iterations."""
         problem = self.problem
@@ -92,7 +110,7 @@ class PixelPhaseField:
         self._new_phase_field = fem.Function(problem.Q)
         self.timings = dict.fromkeys(self.extra_columns, 0.0)
 
-    def step(self) -> int:
+    def solve(self) -> int:
         problem = self.problem
         if self.verified and not self._started:  # the phase field the run continues from (collective)
             start = problem.pixels_from_gauss_points(problem.phase_field_gp)

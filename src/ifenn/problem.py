@@ -389,6 +389,18 @@ class FractureProblem:
     def accept_increment(self) -> None:
         self.history_previous.x.array[:] = self.history.x.array
 
+    def snapshot(self) -> dict:
+        """Copies of the fields an attempted increment changes (u, nodal and Gauss-point phi);
+        H is restored from the accepted increment's own (``history_previous``)."""
+        return {"displacement": self.displacement.x.array.copy(), "phase_field": self.phase_field.x.array.copy(),
+                "phase_field_gp": self.phase_field_gp.x.array.copy()}
+
+    def restore(self, snapshot: dict) -> None:
+        """Undo an attempted increment: the fields of ``snapshot`` and the accepted history."""
+        for name in ("displacement", "phase_field", "phase_field_gp"):
+            getattr(self, name).x.array[:] = snapshot[name]
+        self.history.x.array[:] = self.history_previous.x.array
+
     def reaction_force(self) -> float:
         """Sum of the internal force on the loaded dofs (N per mm of thickness)."""
         with self.internal_force.localForm() as local:

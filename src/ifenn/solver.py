@@ -16,10 +16,12 @@ Work files (resumable state, removed when the run completes): .work/
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from mpi4py import MPI
@@ -27,6 +29,12 @@ from mpi4py import MPI
 from . import run_files
 from .config import spec_hash
 from .io import atomic_path, provenance
+from .loading import largest_change, load_control
+
+if TYPE_CHECKING:
+    from .loading import LoadControl
+    from .phase_field_steps import PhaseFieldStep
+    from .problem import FractureProblem
 
 log = logging.getLogger(__name__)
 
@@ -68,114 +76,24 @@ class NodalMap:
         function.x.array[:] = array[self.node_of_block].ravel()
 
 
-class FixedLoads:
-    """A fixed schedule: the prescribed displacement of increment k is ``loads[k - 1]``."""
+class Clock:
+    """Wall time per named part, summed over the uses of ``with clock(name):``; ``elapsed()``
+    is the time since the clock was made."""
 
-    adaptive = False
+    def __init__(self, *names: str):
+        self.times = dict.fromkeys(names, 0.0)
+        self._start = time.perf_counter()
 
-    def __init__(self, loads: list[float]):
-        self.loads = loads
-        self.u_end = loads[-1]
+    @contextlib.contextmanager
+    def __call__(self, name: str):
+        started = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.times[name] += time.perf_counter() - started
 
-    def next_load(self, increment: int, u_previous: float) -> float | None:
-        return self.loads[increment - 1] if increment <= len(self.loads) else None
-
-    def judge(self, phi_change: float, converged: bool) -> bool:
-        return True
-
-    def is_last(self, increment: int, u: float) -> bool:
-        return increment == len(self.loads)
-
-    def state(self) -> dict:
-        return {}
-
-    def restore(self, state: dict, rows: list[dict]) -> None:
-        pass
-
-
-def largest_change(a: np.ndarray, b: np.ndarray, floor: float = 0.0) -> float:
-    """max |a - b| over the points where a or b is at least ``floor`` (0 when there are none)."""
-    change = np.abs(a - b)
-    if floor > 0.0:
-        change = change[np.maximum(a, b) >= floor]
-    return float(np.max(change, initial=0.0))
-
-
-class AdaptiveLoads:
-    """Adaptive load stepping, a proportional step controller on the largest change of the
-    phase field per increment (the crack's advance), counted where phi (before or after) is at
-    least ``phi_floor``: the crack and its process zone, not the diffuse damage that AT2 spreads
-    everywhere as the load grows (0: everywhere). After each attempt the next step is
-    ``step x quiet_fraction x phi_change_max / change``, clamped to ``[cut, grow]`` x step and
-    to ``[step_min, step_max]``: the step settles where phi moves by ``quiet_fraction x
-    phi_change_max`` per increment, shrinks before the crack runs and grows once phi is quiet.
-    An attempt whose phi moved by more than ``phi_change_max`` (or whose staggered iterations
-    did not converge) is undone and redone with that smaller step, unless it was made at
-    ``step_min`` (always accepted); after ``hold_max`` increments in a row at step_min (phi
-    creeping without end, e.g. an IFENN crack that never cuts through) the step grows by
-    ``grow`` until phi is quiet again. Ends at ``u_end``."""
-
-    adaptive = True
-
-    def __init__(self, settings: dict):
-        self.u_end = float(settings["u_end"])
-        self.step_min, self.step_max = float(settings["step_min"]), float(settings["step_max"])
-        self.grow, self.cut = float(settings["grow"]), float(settings["cut"])
-        self.phi_change_max, self.quiet = float(settings["phi_change_max"]), float(settings["quiet_fraction"])
-        self.step = float(settings["step_initial"])
-        self.hold_max = int(settings.get("hold_max", 500))
-        self.phi_floor = float(settings.get("phi_floor", 0.0))
-        self.rejected = 0  # rejected attempts since the last accepted increment
-        self.held = 0      # consecutive increments accepted at step_min
-        self.released = False
-
-    def next_load(self, increment: int, u_previous: float) -> float | None:
-        if u_previous >= self.u_end * (1 - 1e-12):
-            return None
-        return round(min(u_previous + self.step, self.u_end), 15)
-
-    def _proportional(self, phi_change: float, converged: bool) -> float:
-        """The step factor that would have moved phi by quiet_fraction x phi_change_max."""
-        if not converged:
-            return self.cut
-        target = self.quiet * self.phi_change_max
-        return self.grow if phi_change * self.grow <= target else max(target / phi_change, self.cut)
-
-    def judge(self, phi_change: float, converged: bool) -> bool:
-        """Accept the attempted increment (True) or not; sets the next step either way."""
-        at_min = self.step <= self.step_min * (1 + 1e-9)
-        factor = self._proportional(phi_change, converged)
-        if self.released:  # after hold_max increments at step_min: grow until phi is quiet again
-            self.released = factor < self.grow
-            self.step = min(self.step * self.grow, self.step_max)
-            return True
-        if (phi_change > self.phi_change_max or not converged) and not at_min:
-            self.step = max(self.step * factor, self.step_min)
-            self.rejected += 1
-            return False
-        self.held = self.held + 1 if at_min else 0
-        if self.held >= self.hold_max:
-            log.warning("phi kept changing for %d increments at the smallest step: growing the step again", self.held)
-            self.released, self.held = True, 0
-            factor = self.grow
-        self.step = min(max(self.step * factor, self.step_min), self.step_max)
-        return True
-
-    def is_last(self, increment: int, u: float) -> bool:
-        return u >= self.u_end * (1 - 1e-12)
-
-    def state(self) -> dict:
-        return {"load_step": self.step}
-
-    def restore(self, state: dict, rows: list[dict]) -> None:
-        if "load_step" in state:
-            self.step = float(state["load_step"])
-        elif len(rows) >= 2:  # continuing another run (IFENN from the FEM switch-over)
-            self.step = min(max(rows[-1]["u"] - rows[-2]["u"], self.step_min), self.step_max)
-
-
-def load_control(spec: dict):
-    return AdaptiveLoads(spec["adaptive"]) if spec.get("adaptive") else FixedLoads(spec["load"])
+    def elapsed(self) -> float:
+        return time.perf_counter() - self._start
 
 
 def _write_checkpoint(path: Path, state: dict) -> None:
@@ -187,16 +105,16 @@ def _write_checkpoint(path: Path, state: dict) -> None:
 class StaggeredRun:
     """One run: a problem, a phase-field step, a load list and an output directory."""
 
-    def __init__(self, problem, phase_field_step, spec: dict, out_dir: str | Path, progress: bool = True,
+    def __init__(self, problem: FractureProblem, phase_field_step: PhaseFieldStep, spec: dict, out_dir: str | Path, progress: bool = True,
                  start: dict | None = None, row_constants: dict | None = None, provenance_extra: dict | None = None):
         """``start``: optional {'increment': k, 'state': state dict (rank 0), 'rows': rows 1..k}
         to continue another run's state (a hybrid run from the FEM switch-over increment).
         ``row_constants``: columns with a fixed value on every computed row.
         ``provenance_extra``: more entries of provenance.json (a hybrid run's switch-over)."""
-        self.problem, self.step, self.spec = problem, phase_field_step, spec
+        self.problem, self.phase_field, self.spec = problem, phase_field_step, spec
         self.start, self.row_constants = start, dict(row_constants or {})
         self.provenance_extra = dict(provenance_extra or {})
-        self.loads = load_control(spec)
+        self.loads: LoadControl = load_control(spec)
         adaptive_columns = ["rejected_steps", "rejected_iterations"] if self.loads.adaptive else []
         self.columns = HISTORY_COLUMNS + adaptive_columns + list(phase_field_step.extra_columns) + list(self.row_constants)
         self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
@@ -295,7 +213,7 @@ class StaggeredRun:
         increment = first
         while (u := loads.next_load(increment, u_previous)) is not None:
             try:
-                row = self._increment(increment, u, u_previous)
+                row = self.solve_increment(increment, u, u_previous)
             except Exception as error:
                 if bar is not None:
                     bar.close()
@@ -322,54 +240,50 @@ class StaggeredRun:
         self._finish(time.perf_counter() - started)
         return self.rows
 
-    def _increment(self, increment: int, u: float, u_previous: float) -> dict:
-        """One load increment (staggered iterations); with adaptive loads, attempts that the
-        controller rejects are undone and redone with its smaller step (their time counts)."""
-        p, step, loads = self.problem, self.step, self.loads
-        for key in step.timings:
-            step.timings[key] = 0.0
-        t_u = t_phi = t_h = 0.0
-        t_start = time.perf_counter()
-        accepted_gp = p.phase_field_gp.x.array.copy()
-        saved = (p.displacement.x.array.copy(), p.phase_field.x.array.copy()) if loads.adaptive else None
-        loads.rejected = 0
+    def solve_increment(self, increment: int, u: float, u_previous: float) -> dict:
+        """One load increment at prescribed displacement ``u``: staggered iterations, and with an
+        adaptive controller, attempts it refuses undone and redone at its smaller step (their
+        time counts). Returns the increment's history row."""
+        p, loads = self.problem, self.loads
+        clock = Clock("t_displacement_s", "t_history_s", "t_phase_field_s")
+        self.phase_field.timings.update(dict.fromkeys(self.phase_field.timings, 0.0))
+        accepted = p.snapshot()
+        loads.begin_increment()
         rejected_iterations = 0
         while True:
-            previous = accepted_gp  # read only; rebound to a copy after each iteration
-            converged = False
-            for iteration in range(1, self.spec["stagger_max_iterations"] + 1):  # noqa: B007 (reported below)
-                t0 = time.perf_counter()
-                p.solve_displacement(u)
-                t1 = time.perf_counter()
-                p.update_history()
-                t2 = time.perf_counter()
-                step.step()
-                t3 = time.perf_counter()
-                t_u, t_h, t_phi = t_u + t1 - t0, t_h + t2 - t1, t_phi + t3 - t2
-                change = self._max_change(p.phase_field_gp.x.array, previous)
-                if change < self.spec["stagger_tolerance"]:
-                    converged = True
-                    break
-                previous = p.phase_field_gp.x.array.copy()
-            converged = converged or self.spec["stagger_max_iterations"] == 1
-            if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted_gp, loads.phi_floor), converged):
+            iterations, converged = self._staggered(u, accepted["phase_field_gp"], clock)
+            if not loads.adaptive or loads.judge(self._max_change(p.phase_field_gp.x.array, accepted["phase_field_gp"],
+                                                                  loads.phi_floor), converged):
                 break
-            # rejected: undo the attempt, redo the increment with the controller's smaller step
-            rejected_iterations += iteration
-            p.displacement.x.array[:], p.phase_field.x.array[:] = saved
-            p.phase_field_gp.x.array[:] = accepted_gp
-            p.history.x.array[:] = p.history_previous.x.array
+            rejected_iterations += iterations
+            p.restore(accepted)
             u = loads.next_load(increment, u_previous)
         p.accept_increment()
-        force = p.reaction_force()
-        phi_max = step.phase_field_max()
+        force, phi_max = p.reaction_force(), self.phase_field.phase_field_max()
         if not (np.isfinite(force) and np.isfinite(phi_max)):
             raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
         adaptive = {"rejected_steps": loads.rejected, "rejected_iterations": rejected_iterations} if loads.adaptive else {}
-        return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max,
-                "stagger_iterations": iteration, "t_displacement_s": t_u, "t_phase_field_s": t_phi,
-                "t_history_s": t_h, "t_increment_s": time.perf_counter() - t_start, **adaptive, **step.timings,
-                **self.row_constants}
+        return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max, "stagger_iterations": iterations,
+                **clock.times, "t_increment_s": clock.elapsed(), **adaptive, **self.phase_field.timings, **self.row_constants}
+
+    def _staggered(self, u: float, phase_field_before: np.ndarray, clock: Clock) -> tuple[int, bool]:
+        """Staggered iterations at load ``u`` (Miehe 2010): equilibrium with the current phi,
+        then the history, then the phase field, until phi moves by less than the tolerance
+        (max norm over the Gauss points) or max_iterations (1: the single pass, converged by
+        definition). Returns (iterations, converged)."""
+        p, most = self.problem, self.spec["stagger_max_iterations"]
+        previous = phase_field_before
+        for iteration in range(1, most + 1):
+            with clock("t_displacement_s"):
+                p.solve_displacement(u)
+            with clock("t_history_s"):
+                p.update_history()
+            with clock("t_phase_field_s"):
+                self.phase_field.solve()
+            if self._max_change(p.phase_field_gp.x.array, previous) < self.spec["stagger_tolerance"]:
+                return iteration, True
+            previous = p.phase_field_gp.x.array.copy()
+        return most, most == 1
 
     def _max_change(self, a: np.ndarray, b: np.ndarray, floor: float = 0.0) -> float:
         return self.comm.allreduce(largest_change(a, b, floor), op=MPI.MAX)
@@ -384,7 +298,7 @@ class StaggeredRun:
             run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=self.columns))
             run_files.write_provenance(self.out_dir, provenance(
                 self.hash, wall_s, run=self.spec["name"], mpi_ranks=self.comm.size,
-                phase_field_step=self.step.name, increments=len(self.rows), **self.provenance_extra))
+                phase_field_step=self.phase_field.name, increments=len(self.rows), **self.provenance_extra))
             for path in self.work_dir.glob("*"):
                 path.unlink()
             self.work_dir.rmdir()
@@ -439,5 +353,4 @@ def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bo
     comm = MPI.COMM_WORLD
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
-    return StaggeredRun(problem, step, spec, out_dir, progress).run()
+    return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress).run()

@@ -70,7 +70,7 @@ def whole_run_speed(specs: list[dict], model_path: str | Path, results: str | Pa
             for k, u in enumerate(loads, start=1):
                 order = ("fem", "ifenn") if k % 2 else ("ifenn", "fem")
                 for method in order:
-                    runs[method].rows.append(runs[method]._increment(k, u, u_previous))
+                    runs[method].rows.append(runs[method].solve_increment(k, u, u_previous))
                 u_previous = u
                 if bar is not None:
                     bar.update(1)
