@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.config import REPO, fem_run_spec, load_config
-from ifenn.mesh import build_mesh, write_mesh
+from ifenn.fem.mesh import build_mesh, write_mesh
 
 ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
 STEPS = ["t_displacement_s", "t_phase_field_s", "t_history_s", "t_increment_s"]

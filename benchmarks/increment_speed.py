@@ -40,13 +40,13 @@ COLUMNS = ["run", "method", "displacement_solver", "t_displacement_s", "t_phase_
 
 
 def fem_step(problem, spec, model_path):
-    from ifenn.phase_field_steps import FEMPhaseField
+    from ifenn.fem.phase_field import FEMPhaseField
 
     return FEMPhaseField(problem, spec["petsc"]["phase_field"])
 
 
 def ifenn_process_zone_step(problem, spec, model_path):
-    from ifenn.hybrid import pixel_phase_field
+    from ifenn.hybrid.runs import pixel_phase_field
 
     return pixel_phase_field({**spec, "inference": "process_zone", "predictor": "picnn", "evaluation": "orbit"}, problem, model_path)
 
@@ -61,8 +61,8 @@ class Case:
     one increment at a time. Uses StaggeredRun's own increment (the workflow's code path)."""
 
     def __init__(self, spec, domain, method, solver, start, model_path, work: Path):
-        from ifenn.problem import FractureProblem
-        from ifenn.solver import StaggeredRun
+        from ifenn.fem.problem import FractureProblem
+        from ifenn.fem.solver import StaggeredRun
 
         self.method, self.solver = method, solver
         self.problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
@@ -88,8 +88,8 @@ def increment_speed(specs: list[dict], solvers: dict[str, tuple[str, dict]], met
     """One row per (run, method, solver); ``specs``: IFENN run specs with process-zone settings
     (their FEM runs give the start state, the mesh and the peak force); ``solvers``: column
     label -> (preset name, preset: its PETSc options and displacement_reuse)."""
-    from ifenn.hybrid import switch_state
-    from ifenn.mesh import read_dolfinx_mesh
+    from ifenn.fem.mesh import read_dolfinx_mesh
+    from ifenn.hybrid.runs import switch_state
 
     results = Path(results)
     table = []

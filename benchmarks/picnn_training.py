@@ -12,7 +12,7 @@ target; it differs from FEM by the pixel stencil and the boundary padding).
   extrapolated linearly from the measured time per epoch, their accuracy is the one
   reached after the short run (not extrapolated). The output says so.
 
-Falls back to a synthetic stand-in (``ifenn.training.synthetic_history``, scored against the
+Falls back to a synthetic stand-in (``ifenn.network.training.synthetic_history``, scored against the
 exact pixel solution) when the FEM fields do not exist. Timing is honest wall time on this
 machine with --threads torch threads; other jobs running at the same time slow it down.
 
@@ -30,8 +30,8 @@ import numpy as np
 import pandas as pd
 
 from ifenn.config import REPO, load_config
-from ifenn.picnn import solve_pixel_equation
-from ifenn.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
+from ifenn.network.picnn import solve_pixel_equation
+from ifenn.network.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
 
 
 def read_fields(path: Path, increments: list[int]) -> tuple[float, list[np.ndarray], list[np.ndarray]]:

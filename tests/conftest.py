@@ -39,8 +39,8 @@ def quick_fem_run(quick_config, tmp_path_factory, run: str, folder: str):
     """A FEM run of the quick config, meshed and run in a temporary folder: (spec, folder, history)."""
     import pandas as pd
 
-    from ifenn.mesh import build_mesh, write_mesh
-    from ifenn.solver import run_fem
+    from ifenn.fem.mesh import build_mesh, write_mesh
+    from ifenn.fem.solver import run_fem
 
     tmp = tmp_path_factory.mktemp(folder)
     spec = fem_run_spec(quick_config, run)
@@ -51,8 +51,8 @@ def quick_fem_run(quick_config, tmp_path_factory, run: str, folder: str):
 
 def build_problem(scene, material, petsc, tmp_path, name="scene"):
     """Mesh ``scene`` through the real path (meshio XDMF -> dolfinx) and set up the problem."""
-    from ifenn.mesh import build_mesh, read_dolfinx_mesh, write_mesh
-    from ifenn.problem import FractureProblem
+    from ifenn.fem.mesh import build_mesh, read_dolfinx_mesh, write_mesh
+    from ifenn.fem.problem import FractureProblem
 
     path = Path(tmp_path) / f"{name}.xdmf"
     write_mesh(build_mesh(scene), path)

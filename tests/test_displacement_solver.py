@@ -11,7 +11,7 @@ from conftest import build_problem
 from dolfinx.fem import petsc as fem_petsc
 
 from ifenn.config import ConfigError, validate_config
-from ifenn.phase_field_steps import FEMPhaseField
+from ifenn.fem.phase_field import FEMPhaseField
 
 
 @pytest.fixture
@@ -77,7 +77,7 @@ def test_reaction_from_the_loaded_cells_equals_the_one_from_all_cells(quick_spec
     import ufl
     from dolfinx import fem
 
-    from ifenn import physics
+    from ifenn.fem import physics
 
     spec, kept, _ = _pair(quick_spec, presets, tmp_path)
     kept.phase_field_gp.x.array[:] = np.random.default_rng(2).random(kept.phase_field_gp.x.array.size) * 0.5

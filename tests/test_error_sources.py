@@ -1,4 +1,4 @@
-"""The error split of IFENN replayed on FEM states (ifenn.error_sources), on the quick snt1 scene:
+"""The error split of IFENN replayed on FEM states (ifenn.studies.error_sources), on the quick snt1 scene:
 the exact variant solves the pixel equation, switching a source off makes its contribution
 vanish, and the parts add up to the published step's error."""
 
@@ -11,10 +11,10 @@ import pytest
 import torch
 
 from ifenn.config import fem_run_spec, ifenn_run_spec
-from ifenn.error_sources import PUBLISHED_PARTS, Replay, crack_band_min, error_sources, postswitch_error, saved_states
-from ifenn.mesh import build_mesh, write_mesh
-from ifenn.picnn import PICNN, residual, save_picnn
-from ifenn.solver import run_fem
+from ifenn.fem.mesh import build_mesh, write_mesh
+from ifenn.fem.solver import run_fem
+from ifenn.network.picnn import PICNN, residual, save_picnn
+from ifenn.studies.error_sources import PUBLISHED_PARTS, Replay, crack_band_min, error_sources, postswitch_error, saved_states
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 from conftest import quick_fem_run
 
 from ifenn.config import IFENN_OPTIONS
-from ifenn.hybrid import run_ifenn
+from ifenn.hybrid.runs import run_ifenn
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +62,7 @@ def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tm
     increment ends with max |r| within the tolerance."""
     import torch
 
-    from ifenn.picnn import PICNN, InputScaling, save_picnn
+    from ifenn.network.picnn import PICNN, InputScaling, save_picnn
 
     spec, tmp, fem = fem_run
     torch.manual_seed(0)

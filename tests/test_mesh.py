@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ifenn.mesh import build_mesh, element_size
+from ifenn.fem.mesh import build_mesh, element_size
 
 
 def test_snt1_node_count_matches_the_published_mesh(paper_config):

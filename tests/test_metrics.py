@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.metrics import crack_iou, dissipated_energy, force_curve_error, timing
+from ifenn.studies.metrics import crack_iou, dissipated_energy, force_curve_error, timing
 
 
 @pytest.mark.parametrize("lc_over_h_px", [6, 12])
@@ -59,7 +59,7 @@ def test_crack_ridge_phi_is_the_weakest_section_of_the_band():
     """A straight band from a notch tip to the right edge with phi = 0.999 on its centre line
     but 0.9 in one column: the weakest section is 0.9; a band that stops short connects nothing
     beyond the far field's phi."""
-    from ifenn.metrics import crack_ridge_phi
+    from ifenn.studies.metrics import crack_ridge_phi
 
     ny, nx = 60, 80
     rows = np.arange(ny)[:, None]
@@ -80,7 +80,7 @@ def test_crack_ridge_phi_is_the_weakest_section_of_the_band():
 
 
 def test_post_switch_error_counts_only_hybrid_increments():
-    from ifenn.metrics import post_switch_force_error
+    from ifenn.studies.metrics import post_switch_force_error
 
     u = np.linspace(0, 1, 11)
     fem = pd.DataFrame({"u": u, "reaction_force": 10 * np.minimum(u, 1 - u) * 2})

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from conftest import build_problem
 
-from ifenn.phase_field_steps import FEMPhaseField
+from ifenn.fem.phase_field import FEMPhaseField
 
 
 def _material(paper_config, **changes):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from ifenn.orbit import ConvolutionEvaluator, OrbitEvaluator
-from ifenn.picnn import (
+from ifenn.network.orbit import ConvolutionEvaluator, OrbitEvaluator
+from ifenn.network.picnn import (
     PICNN,
     InputScaling,
     SymmetricConv2d,
@@ -17,7 +17,7 @@ from ifenn.picnn import (
     save_picnn,
     solve_pixel_equation,
 )
-from ifenn.training import PRESETS, make_tiles, resolve_settings, score_picnn, synthetic_history, train_picnn
+from ifenn.network.training import PRESETS, make_tiles, resolve_settings, score_picnn, synthetic_history, train_picnn
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
 
@@ -110,7 +110,7 @@ def test_pixel_solver_matches_a_direct_solve(small_history, padding):
     import scipy.sparse
     import scipy.sparse.linalg
 
-    from ifenn.picnn import laplacian_matrix
+    from ifenn.network.picnn import laplacian_matrix
 
     history = small_history[:, :50]  # a rectangle
     matrix = scipy.sparse.diags(GC / LC + 2 * history.ravel()) - GC * LC / H_PX**2 * laplacian_matrix(64, 50, padding)
@@ -233,7 +233,7 @@ def test_score_picnn_against_itself_and_the_exact_solution(small_history):
 @pytest.mark.parametrize("kernel", ["compiled", "torch"])
 @pytest.mark.parametrize("padding", ["zeros", "replicate", "reflect"])
 def test_orbit_evaluation_is_the_same_network(padding, kernel):
-    """Orbit sums + GEMM (ifenn.orbit) give the convolutions' outputs, on whole images (tiled)
+    """Orbit sums + GEMM (ifenn.network.orbit) give the convolutions' outputs, on whole images (tiled)
     and on boxes at the corners, edges and inside; also for other kernel and channel sizes."""
     torch.manual_seed(1)
     net = PICNN(padding=padding, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
@@ -268,7 +268,7 @@ def test_compiled_dilation_is_the_square_maximum_filter():
 def test_kernel_can_be_turned_off_and_is_rebuilt_where_the_cache_is(monkeypatch, tmp_path):
     """IFENN_KERNEL=0 gives the torch path (and "compiled" then says it is not there); a new
     cache directory gets its own build, which computes what the torch path computes."""
-    from ifenn import orbit_kernel
+    from ifenn.network import orbit_kernel
 
     net = PICNN(init_gain=2.0).eval()
     history = np.random.default_rng(3).lognormal(1.0, 2.0, (20, 30))

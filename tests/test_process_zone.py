@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import torch
 
-from ifenn.orbit import ConvolutionEvaluator, OrbitEvaluator
-from ifenn.picnn import PICNN, InputScaling
-from ifenn.process_zone import FullInference, ProcessZoneInference
+from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
+from ifenn.network.orbit import ConvolutionEvaluator, OrbitEvaluator
+from ifenn.network.picnn import PICNN, InputScaling
 
 
 @pytest.fixture(scope="module")

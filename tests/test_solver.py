@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.mesh import build_mesh, write_mesh
-from ifenn.problem import SolverDivergedError
-from ifenn.solver import HISTORY_COLUMNS, run_fem
+from ifenn.fem.mesh import build_mesh, write_mesh
+from ifenn.fem.problem import SolverDivergedError
+from ifenn.fem.solver import HISTORY_COLUMNS, run_fem
 
 ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
 
@@ -191,7 +191,7 @@ def test_adaptive_steps_reach_the_fine_schedule_peak_with_fewer_increments(quick
 def test_crack_advance_ignores_the_diffuse_damage():
     """The adaptive controller's change counts only where phi (before or after) reaches the floor;
     a phi arriving above it counts in full."""
-    from ifenn.solver import largest_change
+    from ifenn.fem.solver import largest_change
 
     before = np.array([0.02, 0.05, 0.29, 0.6, 0.9])
     after = np.array([0.06, 0.09, 0.35, 0.61, 0.9])

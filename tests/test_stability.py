@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from ifenn.run_files import FIELDS, write_fields
-from ifenn.stability import cell_metrics, cells, classify, table_rows
+from ifenn.studies.stability import cell_metrics, cells, classify, table_rows
 
 THRESHOLDS = {"iou_min": 0.5, "final_force_max": 0.5, "peak_error_max": 0.05}
 

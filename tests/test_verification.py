@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from ifenn.orbit import OrbitEvaluator
-from ifenn.picnn import PICNN, InputScaling, residual, solve_pixel_equation
-from ifenn.process_zone import FullInference, ProcessZoneInference
-from ifenn.training import synthetic_history
-from ifenn.verification import PixelEquation, VerifiedInference, _boxes, _dilated, normalised_residual
+from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
+from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _boxes, _dilated, normalised_residual
+from ifenn.network.orbit import OrbitEvaluator
+from ifenn.network.picnn import PICNN, InputScaling, residual, solve_pixel_equation
+from ifenn.network.training import synthetic_history
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
 
@@ -67,7 +67,7 @@ def test_box_solve_with_the_surroundings_as_boundary_data_is_the_exact_solution(
     """Both correction solvers (the compiled multigrid-preconditioned CG, and the numpy CG with
     the sine-transform preconditioner it falls back to) reproduce the exact pixel solution on
     interior, edge, corner, odd-sized and whole-image boxes."""
-    from ifenn import verification
+    from ifenn.hybrid import verification
 
     if solver == "multigrid":
         if verification._kernel() is None:

@@ -11,10 +11,10 @@ import pytest
 from conftest import quick_fem_run
 
 from ifenn.config import IFENN_OPTIONS, fem_run_spec, ifenn_run_spec
-from ifenn.hybrid import run_ifenn
-from ifenn.mesh import build_mesh, write_mesh
-from ifenn.solver import run_fem
-from ifenn.whole_path import whole_path_comparison
+from ifenn.fem.mesh import build_mesh, write_mesh
+from ifenn.fem.solver import run_fem
+from ifenn.hybrid.runs import run_ifenn
+from ifenn.studies.whole_path import whole_path_comparison
 
 #: whole-path verified IFENN against FEM on the quick snt1-II: peak force (measured 0.04 % with the
 #: quick network, 0.04 % with an untrained one: the check certifies the same pixel solution), u at
@@ -31,7 +31,7 @@ def _random_model(spec, path):
     """An untrained PICNN: the verified step has to correct all of its prediction."""
     import torch
 
-    from ifenn.picnn import PICNN, InputScaling, save_picnn
+    from ifenn.network.picnn import PICNN, InputScaling, save_picnn
 
     torch.manual_seed(0)
     net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()

@@ -52,7 +52,7 @@ def test_quick_profile_issue5_results(quick_workflow):
     """Process-zone IFENN tracks full-image IFENN (force curve within 0.5 %) on every run of
     the quick profile; the speed/accuracy table, the stability CSV and the phase-field
     benchmark have a row for what the config names."""
-    from ifenn.metrics import force_curve_error
+    from ifenn.studies.metrics import force_curve_error
 
     results = quick_workflow / "results"
     for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
@@ -84,7 +84,7 @@ def test_quick_profile_issue5_results(quick_workflow):
 def test_quick_profile_error_sources(quick_workflow):
     """The error split has every source of every configured run; its parts add up to the
     published step; replaying the published step on FEM's states lands near the whole run's error."""
-    from ifenn.error_sources import PUBLISHED_PARTS, SOURCES
+    from ifenn.studies.error_sources import PUBLISHED_PARTS, SOURCES
 
     results = quick_workflow / "results"
     sources = pd.read_csv(results / "tables" / "error_sources.csv")
@@ -147,7 +147,7 @@ def test_quick_profile_verified_runs_track_fem(quick_workflow):
     """Verified IFENN on the seven quick runs: every hybrid increment certified (max |r| within
     the tolerance), and after the switch-over the force tracks FEM within 1 % of its peak (RMS),
     where the published step is off by several percent on most runs."""
-    from ifenn.metrics import post_switch_force_error
+    from ifenn.studies.metrics import post_switch_force_error
 
     results = quick_workflow / "results"
     for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):

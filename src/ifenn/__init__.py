@@ -1,9 +1,18 @@
 """Hybrid FEM + neural-network phase-field fracture (IFENN), reproducible workflow.
 
-Modules: ``config`` (validated configuration), ``mesh`` (structured Q1 meshes with slit
-notches), ``physics`` (UFL forms), ``solver`` (staggered FEM loop), ``pixels`` (Gauss point
-<-> pixel maps), ``io`` (atomic files, provenance), ``plots``. Modules that need dolfinx
-import it themselves, so the config, pixels and PICNN parts work without it.
+Layout, one room per concern:
+
+- top level: ``config`` (validated configuration, run specs), ``io`` (atomic files, logs,
+  progress), ``run_files`` (the formats of a run directory), ``pixels`` (the Gauss-point pixel
+  grid the three layers below share);
+- ``fem``: the finite-element core (mesh, forms, problem, FEM phase-field step, load control,
+  staggered loop);
+- ``network``: the PICNN, its compiled evaluation and its training;
+- ``hybrid``: IFENN's phase-field step, process-zone inference, the verified step, hybrid runs;
+- ``studies``: metrics, figures, benchmarks, the stability sweep and the error split.
+
+Modules that need dolfinx import it themselves, so the config, pixels and PICNN parts work
+without it.
 """
 
 __version__ = "0.1.0"

@@ -38,13 +38,13 @@ def main(argv=None) -> int:
     for noisy in ("ffcx", "UFL", "root", "compilers"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     if args.command == "fem":
-        from .solver import run_fem
+        from ifenn.fem.solver import run_fem
 
         with open(args.spec) as stream:
             spec = json.load(stream)
         run_fem(spec, args.mesh, args.out, progress=not args.no_progress)
     elif args.command == "ifenn":
-        from .hybrid import run_ifenn
+        from ifenn.hybrid.runs import run_ifenn
 
         with open(args.spec) as stream:
             spec = json.load(stream)
@@ -52,7 +52,7 @@ def main(argv=None) -> int:
             parser.error(f"run {spec['name']} switches over from a FEM run ({spec.get('switch_over', 'phi_threshold')}): --fem-dir is needed")
         run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
     elif args.command == "cell":
-        from .stability import run_cell
+        from ifenn.studies.stability import run_cell
 
         with open(args.spec) as stream:
             spec = json.load(stream)

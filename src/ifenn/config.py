@@ -181,7 +181,7 @@ def _semantic_problems(config: dict) -> list[str]:
             problems.append(f"config key '{key}.domain': need x[0] < x[1] and y[0] < y[1], got {scene['domain']}")
             continue
         hx, hy = (x1 - x0) / scene["elements"][0], (y1 - y0) / scene["elements"][1]
-        if abs(hx - hy) > 1e-9 * hx:  # the test of ifenn.mesh.element_size, before any mesh is built
+        if abs(hx - hy) > 1e-9 * hx:  # the test of ifenn.fem.mesh.element_size, before any mesh is built
             problems.append(f"config key '{key}.elements': {scene['elements']} on the domain {scene['domain']} gives "
                             f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
                             f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
@@ -235,7 +235,7 @@ def _semantic_problems(config: dict) -> list[str]:
         if bad:
             problems.append(f"config key 'picnn.training_increments': {bad} exceed the {n_inc} increments of run '{picnn['training_run']}' (allowed 1..{n_inc})")
     try:
-        from .training import resolve_settings
+        from ifenn.network.training import resolve_settings
 
         resolve_settings({"preset": picnn["preset"], **picnn["settings"]})
     except (KeyError, ImportError) as error:

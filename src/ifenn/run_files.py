@@ -2,7 +2,7 @@
 
     spec.json        the run's resolved description (:func:`ifenn.config.fem_run_spec`,
                      :func:`~ifenn.config.ifenn_run_spec`): every option the run used
-    history.csv      one row per increment (:data:`ifenn.solver.HISTORY_COLUMNS` and the
+    history.csv      one row per increment (:data:`ifenn.fem.solver.HISTORY_COLUMNS` and the
                      phase-field step's own columns)
     fields.h5        per saved increment a group ``increment_NNNNNN`` (attrs ``u``,
                      ``increment``) holding the pixel maps ``history`` and ``phase_field_gp``
@@ -26,7 +26,7 @@ import h5py
 import numpy as np
 import pandas as pd
 
-from .io import atomic_path, write_csv, write_json
+from ifenn.io import atomic_path, write_csv, write_json
 
 SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.h5", "provenance.json", "status.json"
 #: the datasets of a saved increment; the first two are the pixel maps

@@ -4,9 +4,9 @@ import sys
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn import stability as _stability
+from ifenn.studies import stability as _stability
 from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, switch_over, training_spec, validate_config
-from ifenn.metrics import process_zone_pairs
+from ifenn.studies.metrics import process_zone_pairs
 
 try:
     _validated = validate_config(config)

@@ -1,6 +1,6 @@
-"""Adapter: scene config -> ifenn.mesh.build_mesh -> XDMF/HDF5 + JSON metadata."""
+"""Adapter: scene config -> ifenn.fem.mesh.build_mesh -> XDMF/HDF5 + JSON metadata."""
+from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.io import log_to
-from ifenn.mesh import build_mesh, write_mesh
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,4 +1,4 @@
-"""Adapter: training data -> ifenn.training.train_picnn -> model, loss log, score table."""
+"""Adapter: training data -> ifenn.network.training.train_picnn -> model, loss log, score table."""
 import json
 import time
 
@@ -6,9 +6,9 @@ import pandas as pd
 
 from ifenn.config import spec_hash
 from ifenn.io import log_to, provenance, write_csv, write_json
-from ifenn.picnn import save_picnn
-from ifenn.training import resolve_settings, score_picnn, train_picnn
-from ifenn.training_data import read_training_data
+from ifenn.network.picnn import save_picnn
+from ifenn.network.training import resolve_settings, score_picnn, train_picnn
+from ifenn.network.training_data import read_training_data
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,6 +1,6 @@
-"""Adapter: FEM fields.h5 -> ifenn.training_data.extract_training_data."""
+"""Adapter: FEM fields.h5 -> ifenn.network.training_data.extract_training_data."""
 from ifenn.io import log_to
-from ifenn.training_data import extract_training_data
+from ifenn.network.training_data import extract_training_data
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

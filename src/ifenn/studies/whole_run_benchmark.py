@@ -26,11 +26,11 @@ INCREMENT_COLUMNS = ["increment", "u", "reaction_force", "phi_max", "t_displacem
 
 def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
     """The FEM run and the whole-path IFENN run of ``spec``, each a StaggeredRun at its initial state."""
-    from .hybrid import pixel_phase_field
-    from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import FEMPhaseField
-    from .problem import FractureProblem
-    from .solver import StaggeredRun
+    from ifenn.fem.mesh import read_dolfinx_mesh
+    from ifenn.fem.phase_field import FEMPhaseField
+    from ifenn.fem.problem import FractureProblem
+    from ifenn.fem.solver import StaggeredRun
+    from ifenn.hybrid.runs import pixel_phase_field
 
     runs = {}
     for method in ("fem", "ifenn"):

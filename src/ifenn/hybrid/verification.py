@@ -1,7 +1,7 @@
 """Verified phase-field step: every prediction checked by the pixel equation it was trained
 on, and corrected where it fails.
 
-The pixel equation (the PICNN's physics loss, :func:`ifenn.picnn.residual`) at pixel i:
+The pixel equation (the PICNN's physics loss, :func:`ifenn.network.picnn.residual`) at pixel i:
 
     R_i(phi) = (Gc/lc + 2 H_i) phi_i - D (K9*(phi)_i - 3 phi_i) - 2 H_i,   D = Gc lc / h_px^2,
 
@@ -73,9 +73,9 @@ import numpy as np
 import scipy.fft
 import scipy.ndimage
 
-from .config import schema_defaults
-from .picnn import LAPLACIAN_K9_STAR
-from .pixels import Box, box_area, grow_box
+from ifenn.config import schema_defaults
+from ifenn.network.picnn import LAPLACIAN_K9_STAR
+from ifenn.pixels import Box, box_area, grow_box
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +84,7 @@ _DEFAULTS = schema_defaults("verification")
 
 
 def _kernel():
-    from .orbit_kernel import load
+    from ifenn.network.orbit_kernel import load
 
     return load()
 
@@ -100,7 +100,7 @@ def _stencil_sum(padded: np.ndarray) -> np.ndarray:
 
 def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate") -> np.ndarray:
     """r = R / (Gc/lc + 2H) on the whole image: an upper bound, in the max norm, of
-    |phi - exact| (module doc). R is the residual of :func:`ifenn.picnn.residual`."""
+    |phi - exact| (module doc). R is the residual of :func:`ifenn.network.picnn.residual`."""
     phi, history = np.asarray(phi, dtype=np.float64), np.asarray(history, dtype=np.float64)
     return PixelEquation(Gc, lc, h_px, padding).residual_on(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])))
 
@@ -170,7 +170,7 @@ class PixelEquation:
         """The exact inverse of the constant-coefficient operator min(a) I - D (K9* - 3 I) on
         the box, by a fast sine transform (zero Dirichlet data around the box: exact there) or,
         for the whole image, by the image padding's own transform (as the global pixel solver)."""
-        from .picnn import _fast_transforms, _laplacian_symbol
+        from ifenn.network.picnn import _fast_transforms, _laplacian_symbol
 
         n, m = box[0].stop - box[0].start, box[1].stop - box[1].start
         if (n, m) == tuple(shape):
@@ -302,10 +302,10 @@ def _boxes(mask: np.ndarray, margin: int) -> list[Box]:
 
 class VerifiedInference:
     """Wrap an inference engine (capped H image -> phi image) with the residual check and
-    the local correction of :mod:`ifenn.verification` (module doc: the bound, the boxes).
+    the local correction of :mod:`ifenn.hybrid.verification` (module doc: the bound, the boxes).
 
-    ``inference``: the network engine (:class:`ifenn.process_zone.FullInference` or
-    :class:`~ifenn.process_zone.ProcessZoneInference`), called every step; with
+    ``inference``: the network engine (:class:`ifenn.hybrid.process_zone.FullInference` or
+    :class:`~ifenn.hybrid.process_zone.ProcessZoneInference`), called every step; with
     ``warm_start="previous"`` it may be None (the network is not used).
     Per call it records ``corrected_fraction`` (share of the image inside correction boxes),
     ``residual_before`` / ``residual_after`` (max |r| over the image before and after the

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import run_files
-from .run_files import read_history, read_spec
+from ifenn import run_files
+from ifenn.run_files import read_history, read_spec
 
 DEFAULT_TARGETS = {"peak_force": 0.01, "u_peak": 0.02, "post_peak_rms": 0.02, "final_force": 0.02}
 
@@ -112,9 +112,9 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     its largest normalised residual max |r| (the check's quantity; >= the largest error) and the
     share of pixels with |r| above the verification tolerance. With ``ifenn_history`` (the
     whole-path run's), its verified step's record at that increment is added."""
-    from .hybrid import _network_inference
-    from .picnn import solve_pixel_equation
-    from .verification import PixelEquation
+    from ifenn.hybrid.runs import _network_inference
+    from ifenn.hybrid.verification import PixelEquation
+    from ifenn.network.picnn import solve_pixel_equation
 
     network_spec = {**spec, "inference": "full", "smoothing_sigma": None}
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]

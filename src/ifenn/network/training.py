@@ -1,6 +1,6 @@
 """Training and scoring of the PICNN.
 
-The loss is the pixel residual of the phase-field equation (``ifenn.picnn.residual``); no
+The loss is the pixel residual of the phase-field equation (``ifenn.network.picnn.residual``); no
 labels are used. Three named presets (``PRESETS``):
 
 * ``"released"``: the authors' released script: Adam, lr 1e-3, 5,000 epochs of full images,
@@ -38,7 +38,7 @@ sampling : "full" (every step sees every pixel of every map) or "tiles": tiles a
 padding : padding of the network's convolutions ("zeros", as the released script).
 laplacian_padding : padding of the Laplacian in the loss: "zeros" (released script, phi = 0
     beyond the image) or "replicate" (zero flux, as the FEM) ("zeros").
-input_scaling, input_reference, input_centre : ``ifenn.picnn.InputScaling`` kind ("none"),
+input_scaling, input_reference, input_centre : ``ifenn.network.picnn.InputScaling`` kind ("none"),
     reference (1.0 N/mm^2) and centre (N/mm^2; None = Gc / (2 lc)).
 history_cap : H_cap, N/mm^2; the loss uses the capped history too (the config's ifenn.history_cap).
 channels, kernel_size : the architecture ((1, 24, 24, 24, 1), 5).
@@ -72,7 +72,7 @@ import pandas as pd
 import torch
 
 from ifenn.io import progress_bar
-from ifenn.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
+from ifenn.network.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
 
 DEFAULT_SETTINGS: dict = {
     "lr": 1e-3,
@@ -362,7 +362,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
 # Scoring against FEM
 # ---------------------------------------------------------------------------------------
 #: Defaults of score_picnn: reference phi above which a pixel is scored as "crack" (any damage
-#: worth scoring: 0.05, not the crack set {phi >= 0.5} of ifenn.metrics.CRACK_PHI) / "fully broken".
+#: worth scoring: 0.05, not the crack set {phi >= 0.5} of ifenn.studies.metrics.CRACK_PHI) / "fully broken".
 SCORE_CRACK_PHI = 0.05
 BROKEN_PHI = 0.9
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import atomic_path
+from ifenn.io import atomic_path
 
 
 @dataclass

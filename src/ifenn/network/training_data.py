@@ -12,8 +12,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import run_files
-from .io import atomic_path
+from ifenn import run_files
+from ifenn.io import atomic_path
 
 
 def extract_training_data(fields_path: str | Path, increments: list[int], out_path: str | Path) -> None:

@@ -10,8 +10,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .io import atomic_path  # noqa: E402
-from .run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
+from ifenn.io import atomic_path  # noqa: E402
+from ifenn.run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
 
 
 def _save(fig, path) -> None:
@@ -412,7 +412,7 @@ def error_sources_figure(sources, path) -> None:
     """Per run (rows): each source's force error over the FEM peak (left: the signed mean over the
     replayed states as bars, additive, so the parts sum to the published step; the RMS as diamonds;
     %) and the largest |phi difference| between the two variants it compares (right).
-    ``sources``: the table of ifenn.error_sources.error_sources."""
+    ``sources``: the table of ifenn.studies.error_sources.error_sources."""
     runs = list(dict.fromkeys(sources.run))
     fig, axes = plt.subplots(len(runs), 2, figsize=(12, 3.4 * len(runs) + 0.8), squeeze=False,
                              gridspec_kw={"width_ratios": [2, 1]})
@@ -456,7 +456,7 @@ def whole_path_figure(pairs: dict, table, path) -> None:
     of FEM and the whole-path run with FEM's peak and phi-threshold increment marked (top), and the
     verified step's work per increment (whole-image CG iterations, and the share of the image
     corrected) against u (bottom). ``pairs``: run -> (FEM history, IFENN history) DataFrames;
-    ``table``: ifenn.whole_path.whole_path_table (the numbers in the titles)."""
+    ``table``: ifenn.studies.whole_path.whole_path_table (the numbers in the titles)."""
     runs = list(pairs)
     fig, axes = plt.subplots(2, len(runs), figsize=(3.6 * len(runs) + 0.6, 6.4), squeeze=False, sharex="col")
     rows = table.set_index("run")
@@ -494,7 +494,7 @@ def whole_path_figure(pairs: dict, table, path) -> None:
 
 def whole_run_speed_figure(increments, summary, path) -> None:
     """The phase-field step over the whole run, FEM against whole-path IFENN, one process and one
-    core (ifenn.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
+    core (ifenn.studies.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
     (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked."""
     runs = list(dict.fromkeys(increments.run))
     fig, axes = plt.subplots(2, len(runs), figsize=(4.2 * len(runs), 6.4), squeeze=False, sharex="col")

@@ -20,8 +20,8 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from . import physics
-from .pixels import PixelGrid
+from ifenn.fem import physics
+from ifenn.pixels import PixelGrid
 
 QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
 EDGE_COMPONENT = {"x": 0, "y": 1}

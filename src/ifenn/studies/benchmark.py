@@ -3,7 +3,7 @@ in the same process: snt1/snt2/snt3 (the mesh study's runs, schedule II), a fixe
 increments of crack propagation from each FEM run's switch-over state.
 
 IFENN methods: the full image with the network's convolutions (torch conv2d, the paper's
-step), the full image with the same network evaluated as orbit sums + products (ifenn.orbit,
+step), the full image with the same network evaluated as orbit sums + products (ifenn.network.orbit,
 in the compiled kernel where it builds: the column network_kernel says which ran), and the
 process zone (orbit evaluation).
 
@@ -22,7 +22,7 @@ from pathlib import Path
 import pandas as pd
 
 #: method -> overrides of the IFENN run spec (None: the FEM step). The verified methods check
-#: every prediction by the pixel equation and correct it (ifenn.verification), with the network
+#: every prediction by the pixel equation and correct it (ifenn.hybrid.verification), with the network
 #: as the warm start or with the last verified phi only (no network: what the network saves).
 _VERIFIED = {"inference": "process_zone", "evaluation": "orbit", "smoothing_sigma": None, "irreversible": False}
 METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluation": "convolution"},
@@ -33,11 +33,11 @@ METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluat
 
 
 def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
-    from .hybrid import pixel_phase_field, switch_state
-    from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import FEMPhaseField
-    from .problem import FractureProblem
-    from .solver import StaggeredRun
+    from ifenn.fem.mesh import read_dolfinx_mesh
+    from ifenn.fem.phase_field import FEMPhaseField
+    from ifenn.fem.problem import FractureProblem
+    from ifenn.fem.solver import StaggeredRun
+    from ifenn.hybrid.runs import pixel_phase_field, switch_state
 
     switch, state, rows = switch_state(fem_dir)
     spec = copy.deepcopy(spec)

@@ -7,7 +7,7 @@ the inputs within ``r_net`` pixels, a square window, 8 for the default network) 
 the Gaussian filter (radius ``r_s = round(truncate sigma)``, 8 at sigma 2).
 
 Process-zone inference keeps every layer's activations of the last evaluation
-(:class:`ifenn.orbit.NetworkState`) and, after one full evaluation, rewrites only the inputs
+(:class:`ifenn.network.orbit.NetworkState`) and, after one full evaluation, rewrites only the inputs
 within r_net of pixels whose capped H changed (r_net = (layers) r, the network's reach, 8 for
 the default network; rewriting only the changed pixels themselves left their neighbours,
 drifting just under the tolerance, stale next to the crack tip) and recomputes what depends on
@@ -39,8 +39,8 @@ import time
 import numpy as np
 import scipy.ndimage
 
-from .config import schema_defaults
-from .pixels import box_area, box_within, grow_box
+from ifenn.config import schema_defaults
+from ifenn.pixels import box_area, box_within, grow_box
 
 #: the settings' defaults: those of the config schema ('ifenn.process_zone')
 _DEFAULTS = schema_defaults("process_zone")
@@ -52,7 +52,7 @@ def _smoothing_radius(sigma: float | None, truncate: float) -> int:
 
 
 def _smooth(image: np.ndarray, sigma: float | None, truncate: float) -> np.ndarray:
-    from .picnn import gaussian_smoothing
+    from ifenn.network.picnn import gaussian_smoothing
 
     return gaussian_smoothing(image, sigma, truncate) if sigma else image
 
@@ -78,7 +78,7 @@ class FullInference:
 class ProcessZoneInference:
     """Carry the changes of the network input through the network only where they reach.
 
-    ``evaluator``: the PICNN's orbit evaluator (:class:`ifenn.orbit.OrbitEvaluator`: its
+    ``evaluator``: the PICNN's orbit evaluator (:class:`ifenn.network.orbit.OrbitEvaluator`: its
     ``network_state`` and ``receptive_radius``).
     """
 
@@ -100,7 +100,7 @@ class ProcessZoneInference:
         self.r_net = int(evaluator.receptive_radius)
         self.r_s = _smoothing_radius(sigma, truncate)
         self.reference = None   # phi_loc of each pixel's input when its drift last restarted
-        # the network's activations, layer by layer (ifenn.orbit.NetworkState); allocated here
+        # the network's activations, layer by layer (ifenn.network.orbit.NetworkState); allocated here
         # when the image ``shape`` is known, as the FEM step builds its matrix ahead of time
         self.state = None if shape is None else evaluator.network_state(shape)
         self.smoothed = None    # stored smoothed output

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import run_files
-from .config import fem_run_spec, ifenn_run_spec
+from ifenn import run_files
+from ifenn.config import fem_run_spec, ifenn_run_spec
 
 LABELS = ("ok", "peak off", "crack path wrong", "no load drop", "diverged")
 
@@ -108,7 +108,7 @@ def resample(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def cell_metrics(cell_dir: str | Path, reference_dir: str | Path) -> dict:
     """Peak and final force, crack IoU of the final phase field against the reference
     (both resampled to the coarser pixel grid) and the reference's peak force."""
-    from .metrics import crack_iou, force_curve_error
+    from ifenn.studies.metrics import crack_iou, force_curve_error
 
     cell_dir, reference_dir = Path(cell_dir), Path(reference_dir)
     status = run_files.read_status(cell_dir)
@@ -174,7 +174,7 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
     failure: status.json says 'ok', 'diverged' (with the error) or 'not started'."""
     import time
 
-    from .mesh import build_mesh, write_mesh
+    from ifenn.fem.mesh import build_mesh, write_mesh
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -184,12 +184,12 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
     status = {"status": "ok"}
     try:
         if fem_dir is None:
-            from .solver import run_fem
+            from ifenn.fem.solver import run_fem
 
             write_mesh(build_mesh(spec["scene"]), out_dir / "mesh.xdmf")
             run_fem(spec, out_dir / "mesh.xdmf", out_dir, progress=False)
         else:
-            from .hybrid import run_ifenn
+            from ifenn.hybrid.runs import run_ifenn
 
             fem_status = run_files.read_status(fem_dir)
             if fem_status["status"] != "ok":

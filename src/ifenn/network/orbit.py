@@ -21,11 +21,11 @@ so a box costs what it covers and is exact wherever it lies. Whole images go box
 (tiles of ``tile`` pixels, small enough to stay in cache).
 
 Where a C++ compiler is at hand (``kernel="auto"``, the default) the layers run instead in a
-compiled kernel (:mod:`ifenn.orbit_kernel`) that fuses the sums and the product on chunks of
+compiled kernel (:mod:`ifenn.network.orbit_kernel`) that fuses the sums and the product on chunks of
 32 pixels of a row, about 2.5 x faster than the torch path on one core, and evaluates any
 set of rows and runs of pixels: :class:`NetworkState` keeps every layer's activations on the
 whole image, so that a change of some inputs is carried through the layers only where it
-reaches (process-zone inference, :mod:`ifenn.process_zone`).
+reaches (process-zone inference, :mod:`ifenn.hybrid.process_zone`).
 """
 
 from __future__ import annotations
@@ -35,14 +35,15 @@ import scipy.ndimage
 import torch
 import torch.nn.functional as F
 
+from ifenn.pixels import Box, box_within, grow_box
+
 from . import orbit_kernel
-from .pixels import Box, box_within, grow_box
 
 KERNELS = ("auto", "compiled", "torch")
 
 
 class OrbitEvaluator:
-    """Inference of a :class:`ifenn.picnn.PICNN` (same outputs, fewer operations).
+    """Inference of a :class:`ifenn.network.picnn.PICNN` (same outputs, fewer operations).
 
     ``predict(history)`` mirrors ``PICNN.predict`` for one (ny, nx) map; ``predict_box``
     evaluates only a box of it; ``network_state(shape)`` keeps the layers' activations of a

@@ -1,7 +1,7 @@
 // One layer of the PICNN as orbit sums + a small matrix product, fused, on rows of pixels.
 //
-// Compiled at first use by ifenn/orbit_kernel.py (g++ -O3 -march=native) and called through
-// ctypes. The arithmetic is that of ifenn/orbit.py (OrbitEvaluator): for every output pixel
+// Compiled at first use by ifenn/network/orbit_kernel.py (g++ -O3 -march=native) and called through
+// ctypes. The arithmetic is that of ifenn/network/orbit.py (OrbitEvaluator): for every output pixel
 // p of a run, the n_free orbit sums S_ab of every input channel in the (2R+1)^2 window
 // around p, then z_o = sum_(k, i) w[o, k * c_in + i] S_k(x_i)(p) and the activation. The
 // difference is that the sums of a chunk of 32 pixels never leave the L1 cache and the
@@ -225,7 +225,7 @@ namespace {
 
 // ---------------------------------------------------------------------------------------------
 // Conjugate gradients preconditioned by one multigrid V-cycle, for the correction of the pixel
-// equation on an n x m box (ifenn/verification.py, PixelEquation.solve_box):
+// equation on an n x m box (ifenn/hybrid/verification.py, PixelEquation.solve_box):
 //
 //     A delta = rhs,   (A x)_i = (a_i + 3 D) x_i - D (0.5 sum_edges x_j + 0.25 sum_corners x_j),
 //

@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .metrics import force_curve_error
-from .run_files import read_history, read_spec
+from ifenn.run_files import read_history, read_spec
+from ifenn.studies.metrics import force_curve_error
 
 
 def _label(method: str, spec: dict) -> str:

@@ -69,8 +69,8 @@ import numpy as np
 import pandas as pd
 import scipy.ndimage
 
-from . import run_files
-from .hybrid import switch_state
+from ifenn import run_files
+from ifenn.hybrid.runs import switch_state
 
 log = logging.getLogger(__name__)
 
@@ -145,11 +145,11 @@ class Replay:
     def __init__(self, spec: dict, mesh_path, model_path, stagger_max_iterations: int = 50, crack_phi: float = 0.95):
         from mpi4py import MPI
 
-        from .hybrid import make_inference
-        from .mesh import read_dolfinx_mesh
-        from .phase_field_steps import FEMPhaseField
-        from .problem import FractureProblem
-        from .solver import NodalMap
+        from ifenn.fem.mesh import read_dolfinx_mesh
+        from ifenn.fem.phase_field import FEMPhaseField
+        from ifenn.fem.problem import FractureProblem
+        from ifenn.fem.solver import NodalMap
+        from ifenn.hybrid.runs import make_inference
 
         self.spec = spec
         self.material = spec["material"]
@@ -171,7 +171,7 @@ class Replay:
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
         """Exact pixel phase field for a history image (pass it capped or not)."""
-        from .picnn import solve_pixel_equation
+        from ifenn.network.picnn import solve_pixel_equation
 
         return solve_pixel_equation(history, self.material["Gc"], self.material["lc"], self.h_px, self.spec["pixel_padding"],
                                     maxiter=5000)

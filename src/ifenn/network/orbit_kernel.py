@@ -3,7 +3,7 @@ with ctypes.
 
 ``load()`` returns the library, or None where it cannot be had (no C++ compiler, a failed
 build, or ``IFENN_KERNEL=0`` in the environment); callers then use the torch path of
-:mod:`ifenn.orbit`, which computes the same thing more slowly. dolfinx compiles its forms
+:mod:`ifenn.network.orbit`, which computes the same thing more slowly. dolfinx compiles its forms
 with the same compiler, so wherever the finite-element side runs the kernel builds too.
 
 The library is built with ``-O3 -march=native`` into ``$IFENN_KERNEL_CACHE`` (default

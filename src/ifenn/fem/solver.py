@@ -26,15 +26,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 from mpi4py import MPI
 
-from . import run_files
-from .config import spec_hash
-from .io import atomic_path, provenance
-from .loading import largest_change, load_control
+from ifenn import run_files
+from ifenn.config import spec_hash
+from ifenn.fem.loading import largest_change, load_control
+from ifenn.io import atomic_path, provenance
 
 if TYPE_CHECKING:
-    from .loading import LoadControl
-    from .phase_field_steps import PhaseFieldStep
-    from .problem import FractureProblem
+    from ifenn.fem.loading import LoadControl
+    from ifenn.fem.phase_field import PhaseFieldStep
+    from ifenn.fem.problem import FractureProblem
 
 log = logging.getLogger(__name__)
 
@@ -346,9 +346,9 @@ class StaggeredRun:
 
 def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True) -> list[dict]:
     """Run a plain-FEM phase-field analysis described by ``spec`` (config.fem_run_spec)."""
-    from .mesh import read_dolfinx_mesh
-    from .phase_field_steps import FEMPhaseField
-    from .problem import FractureProblem
+    from ifenn.fem.mesh import read_dolfinx_mesh
+    from ifenn.fem.phase_field import FEMPhaseField
+    from ifenn.fem.problem import FractureProblem
 
     comm = MPI.COMM_WORLD
     domain = read_dolfinx_mesh(mesh_path, comm)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from . import run_files
+from ifenn import run_files
 
 PREDICTORS = ("picnn", "exact_pixel")
 
@@ -74,11 +74,11 @@ def switch_record(spec: dict, switch: int, rows: list[dict]) -> dict:
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
     checked and corrected by the pixel equation when ``spec['verification']['enabled']``
-    (:mod:`ifenn.verification`). ``shape``: the image's, when known (what the network keeps
+    (:mod:`ifenn.hybrid.verification`). ``shape``: the image's, when known (what the network keeps
     is then allocated now)."""
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
-        from .verification import PixelEquation, VerifiedInference
+        from ifenn.hybrid.verification import PixelEquation, VerifiedInference
 
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
@@ -93,7 +93,7 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
 def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD):
     """The hybrid phase-field step of ``spec`` on ``problem``: its inference (:func:`make_inference`,
     on rank 0), checked and corrected by the pixel equation where ``verification.enabled``."""
-    from .phase_field_steps import PixelPhaseField
+    from ifenn.hybrid.pixel_step import PixelPhaseField
 
     verified = bool((spec.get("verification") or {}).get("enabled"))
     inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
@@ -102,12 +102,12 @@ def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD):
 
 
 def _network_inference(spec: dict, model_path, h_px: float, shape):
-    from .process_zone import FullInference, ProcessZoneInference
+    from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
     if spec["predictor"] == "picnn":
-        from .orbit import make_evaluator
-        from .picnn import load_picnn
+        from ifenn.network.orbit import make_evaluator
+        from ifenn.network.picnn import load_picnn
 
         model, _ = load_picnn(model_path)
         evaluator = make_evaluator(model, spec.get("evaluation", "orbit"))
@@ -119,7 +119,7 @@ def _network_inference(spec: dict, model_path, h_px: float, shape):
             evaluator.prepare(shape)
         return FullInference(evaluator.predict, sigma, truncate, evaluator.kernel)
     if spec["predictor"] == "exact_pixel":
-        from .picnn import solve_pixel_equation
+        from ifenn.network.picnn import solve_pixel_equation
 
         if spec.get("inference", "full") != "full":
             raise ValueError("inference 'process_zone' needs the local PICNN; the exact pixel solve is global: use 'full'")
@@ -132,9 +132,9 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN (by the
     spec's ``switch_over`` criterion, module doc); with ``switch_over: start`` from the scene's
     initial state, and ``fem_dir`` is not read (it may be None)."""
-    from .mesh import read_dolfinx_mesh
-    from .problem import FractureProblem
-    from .solver import StaggeredRun
+    from ifenn.fem.mesh import read_dolfinx_mesh
+    from ifenn.fem.problem import FractureProblem
+    from ifenn.fem.solver import StaggeredRun
 
     comm = MPI.COMM_WORLD
     criterion = spec.get("switch_over", "phi_threshold")

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import scipy.ndimage
 
-from .run_files import FIELDS, SPEC, read_history, read_phase_field_maps, read_spec
+from ifenn.run_files import FIELDS, SPEC, read_history, read_phase_field_maps, read_spec
 
 CRACK_PHI = 0.5
 
