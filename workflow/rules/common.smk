@@ -4,8 +4,8 @@ import sys
 
 from snakemake.settings.types import DeploymentMethod
 
+from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, schedule_increments, switch_over, training_spec, validate_config
 from ifenn.studies import stability as _stability
-from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, switch_over, training_spec, validate_config
 from ifenn.studies.metrics import process_zone_pairs
 
 try:
@@ -24,6 +24,26 @@ MPI_LAUNCHER = "mpirun -n {ranks} --oversubscribe"
 
 def fem_spec_json(run):
     return json.dumps(fem_run_spec(config, run), sort_keys=True)
+
+
+def _fem_cost(run):
+    """A FEM run's expected cost: increments x elements x staggered passes (3 when converged;
+    an adaptive schedule counts as 1000 increments)."""
+    entry = config["fem_runs"][run]
+    increments = schedule_increments(config["schedules"][entry["schedule"]]) or 1000
+    nx, ny = config["scenes"][entry["scene"]]["elements"]
+    passes = 3 if entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1 else 1
+    return increments * nx * ny * passes
+
+
+def fem_priority(wildcards):
+    """Scheduling priority of a FEM run: the PICNN's training run first (every IFENN run waits
+    for the network), then the others longest first (10..90), so the longest job does not
+    start last behind short ones."""
+    if wildcards.run == config["picnn"]["training_run"]:
+        return 100
+    longest = max(_fem_cost(run) for run in config["fem_runs"])
+    return 10 + int(80 * _fem_cost(wildcards.run) / longest)
 
 
 def lc_over_h(fem_run):

@@ -31,9 +31,9 @@ rule fem:
         python=PYTHON,
         out=lambda w, output: os.path.dirname(output.history),
     threads: 1
-    # the FEM runs are the long jobs and everything else waits on them: start them before the
-    # short ones whenever a core is free (a DAG run here once left snt1-III-conv to start last)
-    priority: 10
+    # the FEM runs are the long jobs and everything else waits on them: the training run first,
+    # then longest first, before the short jobs whenever a core is free (common.smk fem_priority)
+    priority: fem_priority
     resources:
         # on SLURM: `tasks` -> --ntasks; a non-empty `mpi` marks an MPI job, whose shell command
         # runs as the batch step (the launcher's mpirun starts the ranks in the allocation)

@@ -8,6 +8,7 @@ rule training_data:
         "results/training/data.h5",
     params:
         increments=lambda w: config["picnn"]["training_increments"],
+    priority: 100  # on the critical path: every IFENN run waits for the network
     conda:
         "../envs/ifenn.yaml"
     log:
@@ -27,6 +28,7 @@ rule train_picnn:
     params:
         spec=lambda w: json.dumps(training_spec(config), sort_keys=True),
     threads: lambda w: config["picnn"]["threads"]
+    priority: 100  # on the critical path: every IFENN run waits for the network
     resources:
         mem_mb=4000,
         runtime=120,
