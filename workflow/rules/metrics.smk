@@ -3,14 +3,13 @@
 
 rule accuracy_table:
     input:
-        ifenn=expand("results/ifenn/{run}/{name}", run=config["ifenn_runs"], name=("fields.h5", "history.csv")),
+        ifenn=expand("results/ifenn/{run}/{name}", run=config["ifenn_runs"], name=("fields.h5", "history.csv", "spec.json")),
         fem=lambda w: sorted({f"results/fem/{r['fem_run']}/{name}" for r in config["ifenn_runs"].values()
                               for name in ("fields.h5", "history.csv", "spec.json")}),
     output:
         report("results/tables/accuracy.csv", caption="../report/accuracy.rst", category="Tables"),
     params:
         runs=run_pairs(),
-        material=config["material"],
     conda:
         "../envs/ifenn.yaml"
     log:

@@ -6,6 +6,6 @@ from ifenn.studies.metrics import accuracy
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])
-rows = [{"run": run, "fem_run": where["fem_run"], **accuracy(where["fem_dir"], where["ifenn_dir"], snakemake.params.material)}
+rows = [{"run": run, "fem_run": where["fem_run"], **accuracy(where["fem_dir"], where["ifenn_dir"])}
         for run, where in snakemake.params.runs.items()]
 write_csv(snakemake.output[0], pd.DataFrame(rows))

@@ -127,9 +127,11 @@ def _nearest(maps: dict, u: float) -> int:
     return min(maps, key=lambda k: abs(maps[k][0] - u))
 
 
-def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, material: dict, levels: int = 3) -> dict:
+def accuracy(fem_dir: str | Path, ifenn_dir: str | Path, levels: int = 3) -> dict:
     """Force-curve and crack metrics of an IFENN run against its FEM run (same scene and
-    schedule; adaptive schedules are compared at equal u)."""
+    schedule; adaptive schedules are compared at equal u). The material (Gc, lc of the
+    dissipated energy) is the one the IFENN run used (its spec.json)."""
+    material = read_spec(ifenn_dir)["material"]
     fem = read_history(fem_dir)
     ifenn = read_history(ifenn_dir)
     f_fem, f_ifenn = fem.reaction_force.to_numpy(), ifenn.reaction_force.to_numpy()
