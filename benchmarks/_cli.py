@@ -18,9 +18,17 @@ def parser(doc: str, section: str, out: str, increments_help: str) -> argparse.A
     cli.add_argument("--model", default="results/picnn/model.pt")
     cli.add_argument("--specs", nargs="+", default=None,
                      help=f"IFENN run specs (results/ifenn/RUN/spec.json); default: {section}.runs of --config")
+    cli.add_argument("--results", default="results", help="the workflow's results folder: meshes in mesh/, FEM runs in fem/")
     cli.add_argument("--increments", type=int, default=None, help=increments_help)
     cli.add_argument("--out", default=out)
     return cli
+
+
+def run_inputs(specs: list[dict], results: str | Path) -> dict[str, dict]:
+    """Per run: its scene's mesh and its FEM run's directory, in the workflow's results layout."""
+    results = Path(results)
+    return {spec["name"]: {"mesh": results / "mesh" / f"{spec['scene_name']}.xdmf", "fem_dir": results / "fem" / spec["fem_run"]}
+            for spec in specs}
 
 
 def setup(args: argparse.Namespace, section: str) -> tuple[dict, list[dict]]:

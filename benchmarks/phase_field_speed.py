@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 
 import pandas as pd
-from _cli import parser, setup
+from _cli import parser, run_inputs, setup
 
 from ifenn.studies.benchmark import phase_field_speed
 
@@ -26,7 +26,8 @@ def main() -> int:
     setup_section = config["phase_field_benchmark"]
     zone = json.loads(args.process_zone) if args.process_zone else config["ifenn"]["process_zone"]
     verification = json.loads(args.verification) if args.verification else config["ifenn"]["verification"]
-    table = phase_field_speed(specs, zone, args.model, args.increments or setup_section["increments"], verification=verification)
+    table = phase_field_speed(specs, run_inputs(specs, args.results), zone, args.model, args.increments or setup_section["increments"],
+                              verification=verification)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):

@@ -9,7 +9,7 @@ PICNN of the workflow (results/), no FEM run. Run it alone: the numbers are wall
 from __future__ import annotations
 
 import pandas as pd
-from _cli import parser, setup
+from _cli import parser, run_inputs, setup
 
 from ifenn.io import write_csv
 from ifenn.studies.whole_run_benchmark import whole_run_speed
@@ -20,7 +20,7 @@ def main() -> int:
     cli.add_argument("--out-increments", default="results/benchmarks/whole_run_speed_increments.csv")
     args = cli.parse_args()
     _, specs = setup(args, "whole_run_benchmark")
-    summary, increments = whole_run_speed(specs, args.model, increments=args.increments)
+    summary, increments = whole_run_speed(specs, run_inputs(specs, args.results), args.model, increments=args.increments)
     write_csv(args.out, summary)
     write_csv(args.out_increments, increments)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):

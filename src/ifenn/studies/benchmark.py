@@ -64,21 +64,20 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     return history[history.increment > switch].assign(network_kernel=kernel)
 
 
-def phase_field_speed(specs: list[dict], process_zone: dict, model_path: str | Path, increments: int = 40,
-                      results: str | Path = "results", verification: dict | None = None) -> pd.DataFrame:
+def phase_field_speed(specs: list[dict], inputs: dict[str, dict], process_zone: dict, model_path: str | Path, increments: int = 40,
+                      verification: dict | None = None) -> pd.DataFrame:
     """One row per (IFENN run spec, method): mean seconds per increment of the displacement
     solve, the phase-field step and the increment, the fraction of pixels the network
     evaluated, and the phase-field step's speed-up over FEM's. ``process_zone``: the settings
     of the process-zone method (config 'ifenn.process_zone'); ``verification``: those of the
-    verified methods (config 'ifenn.verification'; ``enabled`` is set by the method)."""
-    results = Path(results)
+    verified methods (config 'ifenn.verification'; ``enabled`` is set by the method).
+    ``inputs``: per run name, its scene's ``mesh`` (XDMF) and its FEM run's ``fem_dir``."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
             spec = {**spec, "process_zone": spec.get("process_zone") or process_zone,
                     "verification": spec.get("verification") or verification or {}}
-            fem_dir = results / "fem" / spec["fem_run"]
-            mesh = results / "mesh" / f"{spec['scene_name']}.xdmf"
+            fem_dir, mesh = Path(inputs[spec["name"]]["fem_dir"]), Path(inputs[spec["name"]]["mesh"])
             for method in METHODS:
                 history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp))
                 nx, ny = spec["scene"]["elements"]

@@ -46,7 +46,7 @@ def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
     return runs
 
 
-def whole_run_speed(specs: list[dict], model_path: str | Path, results: str | Path = "results",
+def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str | Path,
                     increments: int | None = None, progress: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(summary, per-increment table). ``specs``: whole-path IFENN run specs (``switch_over``
     'start', a fixed schedule); ``increments``: the first increments of each schedule (None: all).
@@ -54,14 +54,13 @@ def whole_run_speed(specs: list[dict], model_path: str | Path, results: str | Pa
     the totals before FEM's phi-threshold increment (pre-nucleation) and from it on
     (propagation), displacement and increment totals, the final force, and FEM's phase-field
     total over the method's (``phase_field_speedup_vs_fem``, > 1 = faster than FEM)."""
-    results = Path(results)
     summary, per_increment = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
             if spec.get("switch_over") != "start" or "load" not in spec:
                 raise ValueError(f"run {spec['name']}: the whole-run benchmark needs switch_over 'start' and a fixed schedule")
             loads = spec["load"][:increments] if increments else spec["load"]
-            runs = _runs(spec, results / "mesh" / f"{spec['scene_name']}.xdmf", Path(model_path), Path(tmp))
+            runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp))
             bar = None
             if progress:
                 from tqdm import tqdm
