@@ -8,6 +8,7 @@ and what is allowed.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import json
 from pathlib import Path
@@ -60,15 +61,11 @@ def schema_default(*keys: str):
     return node["default"]
 
 
-def _schema() -> dict:
-    global _SCHEMA
-    if _SCHEMA is None:
-        with open(SCHEMA_PATH) as stream:
-            _SCHEMA = yaml.safe_load(stream)
-    return _SCHEMA
-
-
-_SCHEMA = None
+@functools.cache
+def _schema(path: Path = SCHEMA_PATH) -> dict:
+    """The config schema, read once per process (treat as read-only)."""
+    with open(path) as stream:
+        return yaml.safe_load(stream)
 
 
 def _key_path(path) -> str:
@@ -112,8 +109,7 @@ def _specific(errors):
 def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
     """Validate against the JSON schema, fill defaults, then check cross-references and
     geometry. Returns a new, completed config; raises ConfigError listing every problem."""
-    with open(schema_path) as stream:
-        schema = yaml.safe_load(stream)
+    schema = _schema(Path(schema_path))
     validator = jsonschema.Draft202012Validator(schema)
     problems = [
         f"config key '{_key_path(err.absolute_path)}': {err.message}"

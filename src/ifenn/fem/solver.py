@@ -29,7 +29,7 @@ from mpi4py import MPI
 from ifenn import run_files
 from ifenn.config import spec_hash
 from ifenn.fem.loading import largest_change, load_control
-from ifenn.io import atomic_path, provenance
+from ifenn.io import atomic_path, progress_bar, provenance
 
 if TYPE_CHECKING:
     from ifenn.fem.loading import LoadControl
@@ -204,12 +204,11 @@ class StaggeredRun:
         u_previous = self.comm.bcast(self.rows[-1]["u"] if self.rank0 and self.rows else 0.0, root=0)
         bar = None
         if self.rank0 and self.progress:
-            from tqdm import tqdm
             # progress in micrometres of prescribed displacement: also right for adaptive steps
             # miniters ~ 0: refresh on time only (adaptive steps may be a thousand times smaller than others)
-            bar = tqdm(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"], unit="um",
-                       mininterval=0.5 if os.isatty(2) else 10.0, miniters=1e-12, dynamic_ncols=True,
-                       bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+            bar = progress_bar(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"], unit="um",
+                               miniters=1e-12, dynamic_ncols=True,
+                               bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
         increment = first
         while (u := loads.next_load(increment, u_previous)) is not None:
             try:

@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ifenn.io import progress_bar
+
 #: columns of the per-increment table (those a method lacks are NaN)
 INCREMENT_COLUMNS = ["increment", "u", "reaction_force", "phi_max", "t_displacement_s", "t_phase_field_s", "t_increment_s",
                      "t_inference_s", "t_verify_s", "verify_corrected_fraction", "verify_solve_work"]
@@ -63,8 +65,7 @@ def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str 
             runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp))
             bar = None
             if progress:
-                from tqdm import tqdm
-                bar = tqdm(total=len(loads), desc=f"{spec['name']} (FEM + IFENN)", mininterval=10.0)
+                bar = progress_bar(total=len(loads), desc=f"{spec['name']} (FEM + IFENN)")
             u_previous = 0.0
             for k, u in enumerate(loads, start=1):
                 order = ("fem", "ifenn") if k % 2 else ("ifenn", "fem")
