@@ -56,4 +56,5 @@ rule all:
         ["results/tables/error_sources.csv", "results/figures/error_sources.png"] if config.get("error_sources") else [],
         "results/benchmarks/increment_speed.csv" if config.get("increment_benchmark") else [],
         ["results/tables/whole_path.csv", "results/figures/whole_path.png"] if config.get("whole_path") else [],
+        ["results/tables/reference_convergence.csv", "results/figures/reference_convergence.png"] if config.get("reference_convergence") else [],
         ["results/benchmarks/whole_run_speed.csv", "results/figures/whole_run_speed.png"] if config.get("whole_run_benchmark") else [],

@@ -286,6 +286,7 @@ def _semantic_problems(config: dict) -> list[str]:
         if bad:
             problems.append(f"config key 'stability.steps': steps {bad} give outside 1..100000 increments to u_end = {sweep['u_end']}")
     problems += _switch_over_problems(config)
+    problems += _reference_convergence_problems(config)
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:
             problems.append(
@@ -303,6 +304,39 @@ def _semantic_problems(config: dict) -> list[str]:
         if verification.get("enabled") and padding not in ("replicate", "zeros"):
             problems.append(f"config key 'ifenn_runs.{name}.pixel_padding': the verified step's pixel equation needs "
                             f"'replicate' or 'zeros', got '{padding}'")
+    return problems
+
+
+def _reference_convergence_problems(config: dict) -> list[str]:
+    """A finer reference must be the same specimen, loads and solver settings on more elements."""
+    problems = []
+    fem_runs, ifenn_runs = config.get("fem_runs", {}), config.get("ifenn_runs", {})
+    for case, entry in config.get("reference_convergence", {}).items():
+        key = f"reference_convergence.{case}"
+        names = {field: entry[field] for field in ("fem_run", "fine_fem_run")}
+        missing = [f for f, run in names.items() if run not in fem_runs]
+        for field in missing:
+            problems.append(f"config key '{key}.{field}': '{names[field]}' is not a FEM run; allowed: {sorted(fem_runs)}")
+        if missing:
+            continue
+        coarse, fine = fem_runs[entry["fem_run"]], fem_runs[entry["fine_fem_run"]]
+        scene_c, scene_f = config["scenes"].get(coarse["scene"]), config["scenes"].get(fine["scene"])
+        if scene_c is None or scene_f is None:
+            continue  # the fem_runs check names the unknown scene
+        different = [k for k in ("domain", "notches", "boundary") if scene_c.get(k) != scene_f.get(k)]
+        different += [k for k in sorted(set(coarse) | set(fine)) if k not in ("scene", "save_fields") and coarse.get(k) != fine.get(k)]
+        if different:
+            problems.append(f"config key '{key}.fine_fem_run': '{entry['fine_fem_run']}' differs from '{entry['fem_run']}' in "
+                            f"{different}; a finer reference may differ in the scene's elements only")
+        if not all(f > c for f, c in zip(scene_f["elements"], scene_c["elements"])):
+            problems.append(f"config key '{key}.fine_fem_run': scene '{fine['scene']}' has {scene_f['elements']} elements, "
+                            f"not more than '{coarse['scene']}' ({scene_c['elements']}) in both directions")
+        for k, run in enumerate(entry["ifenn_runs"]):
+            if run not in ifenn_runs:
+                problems.append(f"config key '{key}.ifenn_runs[{k}]': '{run}' is not an IFENN run; allowed: {sorted(ifenn_runs)}")
+            elif ifenn_runs[run]["fem_run"] != entry["fem_run"]:
+                problems.append(f"config key '{key}.ifenn_runs[{k}]': '{run}' continues FEM run '{ifenn_runs[run]['fem_run']}', "
+                                f"not '{entry['fem_run']}'")
     return problems
 
 

@@ -162,6 +162,14 @@ def whole_path_dirs():
             for run, fem in whole_path_runs().items()}
 
 
+def reference_convergence_dirs():
+    """Case of config 'reference_convergence' -> its runs and their directories."""
+    return {case: {"fem_run": entry["fem_run"], "fine_fem_run": entry["fine_fem_run"],
+                   "fem_dir": f"results/fem/{entry['fem_run']}", "fine_dir": f"results/fem/{entry['fine_fem_run']}",
+                   "ifenn_dirs": {run: f"results/ifenn/{run}" for run in entry["ifenn_runs"]}}
+            for case, entry in config.get("reference_convergence", {}).items()}
+
+
 def whole_path_network_cases():
     """The pre-nucleation replay's runs: spec, FEM fields, the network and the run's history."""
     return {run: {"spec": f"results/ifenn/{run}/spec.json", "fem_fields": f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",

@@ -121,3 +121,20 @@ rule increment_benchmark:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
         " --solvers {params.solvers} --new-solver {params.new_solver} --process-zone {params.zone}"
         " --increments {params.increments} --out {output} > {log} 2>&1"
+
+
+rule reference_convergence:
+    input:
+        lambda w: sorted({f"{d}/history.csv" for case in reference_convergence_dirs().values()
+                          for d in (case["fem_dir"], case["fine_dir"], *case["ifenn_dirs"].values())}),
+    output:
+        table=report("results/tables/reference_convergence.csv", caption="../report/reference_convergence.rst", category="Tables"),
+        figure=report("results/figures/reference_convergence.png", caption="../report/reference_convergence.rst", category="IFENN runs"),
+    params:
+        cases=lambda w: reference_convergence_dirs(),
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/tables/reference_convergence.log",
+    script:
+        "../scripts/reference_convergence.py"

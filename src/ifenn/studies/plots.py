@@ -528,3 +528,45 @@ def whole_run_speed_figure(increments, summary, path) -> None:
                  "(dotted: FEM's phi_max > switch threshold)", fontsize=9)
     fig.tight_layout()
     _save(fig, path)
+
+
+def reference_convergence_figure(curves: dict, table, path) -> None:
+    """Per case (columns): the force curves after the peak of FEM at h, FEM on the finer mesh and
+    the IFENN runs (top), and each curve's |F| - |F| of the finer FEM over the peak of FEM at h
+    (bottom). ``curves``: case -> {label: history} (FEM at h first, the finer FEM second);
+    ``table``: ifenn.studies.reference_convergence.reference_convergence_table."""
+    cases = list(curves)
+    fig, axes = plt.subplots(2, len(cases), figsize=(4.4 * len(cases) + 0.6, 6.4), squeeze=False, sharex="col")
+    for k, case in enumerate(cases):
+        rows = table[table.case == case]
+        first = rows.iloc[0]
+        peak, window = first.peak_force_fem, (first.u_peak_fem, None)
+        labels = list(curves[case])
+        fine = curves[case][labels[1]]
+        u_fine, f_fine = fine.u.to_numpy(), fine.reaction_force.abs().to_numpy()
+        top, bottom = axes[0, k], axes[1, k]
+        styles = [dict(color="k", lw=1.4), dict(color="k", lw=1.0, ls=":")]
+        colours = iter(["tab:red", "tab:blue", "tab:green", "tab:orange", "tab:purple", "tab:brown"])
+        numbers = rows.set_index("run")  # FEM at h: run ""
+        for j, label in enumerate(labels):
+            history = curves[case][label]
+            u, force = history.u.to_numpy(), history.reaction_force.abs().to_numpy()
+            style = styles[j] if j < 2 else dict(color=next(colours), lw=1.0, ls="--")
+            run = label.split(" ", 1)[1] if j >= 2 else ""
+            if j != 1:
+                r = numbers.loc[run]
+                label = f"{label}: RMS {100 * r.rms_vs_fem:.2f} % vs FEM, {100 * r.rms_vs_fine:.2f} % vs finer"
+            after = u >= window[0] * 0.97
+            top.plot(u[after], force[after], label=label, **style)
+            if j != 1:
+                inside = u > window[0]
+                bottom.plot(u[inside], 100 * (force[inside] - np.interp(u[inside], u_fine, f_fine)) / peak, **style)
+        top.set_title(f"{case}: after the peak of FEM {first.fem_run}", fontsize=8)
+        top.set_ylabel("reaction force (N/mm)" if k == 0 else "")
+        top.legend(fontsize=6)
+        bottom.axhline(0.0, color="0.6", lw=0.6)
+        bottom.set_xlabel("u (mm)")
+        bottom.set_ylabel("|F| - |F| finer FEM (% of the FEM peak)" if k == 0 else "")
+    fig.suptitle("Which discretisation is right after the peak: IFENN and its FEM reference against a finer FEM", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
