@@ -18,6 +18,7 @@ log = logging.getLogger(__name__)
 class LoadControl(Protocol):
     adaptive: bool
     u_end: float
+    increments: int | None  # known in advance (fixed schedules), else None
 
     def next_load(self, increment: int, u_previous: float) -> float | None:
         """The prescribed displacement of ``increment`` (1-based), None after the last."""
@@ -45,6 +46,7 @@ class FixedLoads:
     def __init__(self, loads: list[float]):
         self.loads = loads
         self.u_end = loads[-1]
+        self.increments = len(loads)
 
     def next_load(self, increment: int, u_previous: float) -> float | None:
         return self.loads[increment - 1] if increment <= len(self.loads) else None
@@ -88,6 +90,7 @@ class AdaptiveLoads:
     ``grow`` until phi is quiet again. Ends at ``u_end``."""
 
     adaptive = True
+    increments = None
 
     def __init__(self, settings: dict):
         self.u_end = float(settings["u_end"])

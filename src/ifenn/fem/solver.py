@@ -204,11 +204,15 @@ class StaggeredRun:
         u_previous = self.comm.bcast(self.rows[-1]["u"] if self.rank0 and self.rows else 0.0, root=0)
         bar = None
         if self.rank0 and self.progress:
-            # progress in micrometres of prescribed displacement: also right for adaptive steps
-            # miniters ~ 0: refresh on time only (adaptive steps may be a thousand times smaller than others)
-            bar = progress_bar(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"], unit="um",
-                               miniters=1e-12, dynamic_ncols=True,
-                               bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+            if loads.increments:
+                # a fixed schedule: progress in increments (its steps may differ a thousandfold between segments)
+                bar = progress_bar(total=loads.increments, initial=first - 1, desc=spec["name"], unit="inc", dynamic_ncols=True)
+            else:
+                # adaptive steps: progress in micrometres of prescribed displacement;
+                # miniters ~ 0: refresh on time only (steps may be a thousand times smaller than others)
+                bar = progress_bar(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"],
+                                   unit="um", miniters=1e-12, dynamic_ncols=True,
+                                   bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
         increment = first
         while (u := loads.next_load(increment, u_previous)) is not None:
             try:
@@ -228,8 +232,9 @@ class StaggeredRun:
             if increment % spec["checkpoint_every"] == 0 or last:
                 self._checkpoint(increment)
             if bar is not None:
-                bar.set_postfix(inc=increment, F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", refresh=False)
-                bar.update(round((u - u_previous) * 1e3, 6))
+                bar.set_postfix(inc=increment, u=f"{u:.4g}", F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}",
+                                refresh=False)
+                bar.update(1 if loads.increments else round((u - u_previous) * 1e3, 6))
             u_previous, increment = row["u"], increment + 1
         if bar is not None:
             bar.close()
