@@ -328,7 +328,7 @@ def _reference_convergence_problems(config: dict) -> list[str]:
         if different:
             problems.append(f"config key '{key}.fine_fem_run': '{entry['fine_fem_run']}' differs from '{entry['fem_run']}' in "
                             f"{different}; a finer reference may differ in the scene's elements only")
-        if not all(f > c for f, c in zip(scene_f["elements"], scene_c["elements"])):
+        if not all(f > c for f, c in zip(scene_f["elements"], scene_c["elements"], strict=False)):
             problems.append(f"config key '{key}.fine_fem_run': scene '{fine['scene']}' has {scene_f['elements']} elements, "
                             f"not more than '{coarse['scene']}' ({scene_c['elements']}) in both directions")
         for k, run in enumerate(entry["ifenn_runs"]):
