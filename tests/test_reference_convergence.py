@@ -45,9 +45,10 @@ def test_a_finer_reference_that_ends_early_is_refused():
 def test_config_refuses_a_finer_reference_that_is_not_the_same_specimen(paper_config):
     config = copy.deepcopy(paper_config)
     config["fem_runs"]["snt1-II-fine"]["schedule"] = "I"
-    config["reference_convergence"]["snt1-II"]["ifenn_runs"].append("sdnt")
+    runs = config["reference_convergence"]["snt1-II"]["ifenn_runs"]
+    runs.append("sdnt")
     with pytest.raises(ValueError) as error:
         validate_config(config)
     text = str(error.value)
     assert "reference_convergence.snt1-II.fine_fem_run" in text and "['schedule']" in text
-    assert "reference_convergence.snt1-II.ifenn_runs[3]" in text and "continues FEM run 'sdnt'" in text
+    assert f"reference_convergence.snt1-II.ifenn_runs[{len(runs) - 1}]" in text and "continues FEM run 'sdnt'" in text
