@@ -7,8 +7,9 @@ the FEM run's fields.h5) and takes the same loads. The pairs advance in turn, on
 alike: compare the rows of one run as ratios, not their seconds across runs or machines.
 
 Methods (METHODS: name -> phase-field step factory; a new method, e.g. the verified IFENN step,
-is one more entry): ``fem`` (the Q1 phase-field solve) and ``ifenn`` (the PICNN on the process
-zone, ``inference: process_zone``). Solvers: the config's ``solvers`` map, a column label -> a
+is one more entry): ``fem`` (the Q1 phase-field solve), ``ifenn`` (the PICNN on the process
+zone, ``inference: process_zone``, unchecked) and ``ifenn-verified`` (the run's verified step: the
+process-zone prediction checked by the pixel equation and corrected where it fails). Solvers: the config's ``solvers`` map, a column label -> a
 linear-solver preset (``gamg`` -> ``iterative``, today's default; ``direct``; ``gamg-reuse``).
 
 Columns (one row per run, method, solver): the mean seconds per increment of the displacement
@@ -46,14 +47,25 @@ def fem_step(problem, spec, model_path):
 
 
 def ifenn_process_zone_step(problem, spec, model_path):
+    """The PICNN on the process zone, unchecked (the run's smoothing and cap)."""
     from ifenn.hybrid.runs import pixel_phase_field
 
-    return pixel_phase_field({**spec, "inference": "process_zone", "predictor": "picnn", "evaluation": "orbit"}, problem, model_path)
+    spec = {**spec, "inference": "process_zone", "predictor": "picnn", "evaluation": "orbit",
+            "verification": {**(spec.get("verification") or {}), "enabled": False}}
+    return pixel_phase_field(spec, problem, model_path)
 
 
-#: method -> factory(problem, spec, model path) of its phase-field step. The hook for more
-#: methods: add e.g. "ifenn-verified": <factory of the verified IFENN step> here.
-METHODS = {"fem": fem_step, "ifenn": ifenn_process_zone_step}
+def ifenn_verified_step(problem, spec, model_path):
+    """The verified IFENN step of the run (its ``verification`` settings; the run must be a verified one)."""
+    from ifenn.hybrid.runs import pixel_phase_field
+
+    if not (spec.get("verification") or {}).get("enabled"):
+        raise ValueError(f"method 'ifenn-verified' needs a verified IFENN run (verification.enabled); {spec['name']!r} is not one")
+    return pixel_phase_field(spec, problem, model_path)
+
+
+#: method -> factory(problem, spec, model path) of its phase-field step
+METHODS = {"fem": fem_step, "ifenn": ifenn_process_zone_step, "ifenn-verified": ifenn_verified_step}
 
 
 class Case:
@@ -132,16 +144,17 @@ def increment_speed(specs: list[dict], solvers: dict[str, tuple[str, dict]], met
 
 
 def ratios(table: pd.DataFrame, solver: str) -> pd.DataFrame:
-    """Per run: gamg / ``solver`` displacement time (FEM and IFENN), and FEM / IFENN increment time
-    with ``solver``."""
+    """Per run: gamg / ``solver`` displacement time (every method), and FEM / each IFENN method's
+    increment time with ``solver``."""
     t = table.set_index(["run", "method", "displacement_solver"])
     out = []
     for run in table.run.unique():
         row = {"run": run}
         for method in table.method.unique():
             row[f"{method}_displacement_gamg_over_{solver}"] = t.loc[(run, method, "gamg"), "t_displacement_s"] / t.loc[(run, method, solver), "t_displacement_s"]
-        if {"fem", "ifenn"} <= set(table.method):
-            row[f"increment_fem_over_ifenn_{solver}"] = t.loc[(run, "fem", solver), "t_increment_s"] / t.loc[(run, "ifenn", solver), "t_increment_s"]
+        for method in sorted(set(table.method) - {"fem"}) if "fem" in set(table.method) else []:
+            row[f"increment_fem_over_{method}_{solver}"] = (t.loc[(run, "fem", solver), "t_increment_s"]
+                                                            / t.loc[(run, method, solver), "t_increment_s"])
         out.append(row)
     return pd.DataFrame(out)
 
@@ -157,7 +170,7 @@ def main() -> int:
     parser.add_argument("--new-solver", default=None, help="label of the solver whose ratios are printed")
     parser.add_argument("--process-zone", default=None, help="JSON of the process-zone settings; default: ifenn.process_zone of --config")
     parser.add_argument("--increments", type=int, default=None, help="default: increment_benchmark.increments")
-    parser.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    parser.add_argument("--methods", nargs="+", default=None, choices=list(METHODS), help="default: increment_benchmark.methods")
     parser.add_argument("--out", default="results/benchmarks/increment_speed.csv")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
@@ -178,7 +191,8 @@ def main() -> int:
     presets = config["solver"]["linear_solver_presets"]
     solvers = json.loads(args.solvers) if args.solvers else {label: (name, presets[name]) for label, name in setup["solvers"].items()}
     new_solver = args.new_solver or setup["new_solver"]
-    table = increment_speed(specs, solvers, args.methods, args.increments or setup["increments"], args.model, args.results)
+    methods = args.methods or setup["methods"]
+    table = increment_speed(specs, solvers, methods, args.increments or setup["increments"], args.model, args.results)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 220, "display.max_columns", 20, "display.float_format", "{:.4g}".format):

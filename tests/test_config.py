@@ -63,6 +63,9 @@ def assert_refused(paper_config, mutate, expected):
         (lambda c: c["picnn"]["settings"].update(sampling="process_zone"), ["picnn.settings", "sampling", "'process_zone'", "'tiles'"]),
         (lambda c: c["solver"]["linear_solver_presets"]["gamg-reuse"]["displacement"].update(mg_levels_ksp_max_it=0),
          ["gamg-reuse.displacement.mg_levels_ksp_max_it", "positive integer"]),
+        (lambda c: c["increment_benchmark"].update(runs=["snt1-II-pz"]),
+         ["increment_benchmark.runs", "'snt1-II-pz'", "not a verified IFENN run", "'ifenn-verified'"]),
+        (lambda c: c["increment_benchmark"].update(methods=["fem", "ifenn-checked"]), ["increment_benchmark.methods", "'ifenn-checked'"]),
     ],
 )
 def test_bad_values_name_key_value_and_allowed(paper_config, mutate, expected):

@@ -271,6 +271,12 @@ def _semantic_problems(config: dict) -> list[str]:
         for run in bench["runs"]:
             if run not in config.get("ifenn_runs", {}):
                 problems.append(f"config key 'increment_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+            elif "ifenn-verified" in bench.get("methods", ["ifenn-verified"]):
+                verified = (config["ifenn_runs"][run].get("verification") or {}).get(
+                    "enabled", (config["ifenn"].get("verification") or {}).get("enabled", False))
+                if not verified:
+                    problems.append(f"config key 'increment_benchmark.runs': '{run}' is not a verified IFENN run "
+                                    "(verification.enabled), which method 'ifenn-verified' times")
         for label, preset in bench["solvers"].items():
             if preset not in presets:
                 problems.append(f"config key 'increment_benchmark.solvers.{label}': '{preset}' is not a preset; allowed: {sorted(presets)}")

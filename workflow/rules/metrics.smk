@@ -110,6 +110,7 @@ rule increment_benchmark:
         solvers=lambda w: json.dumps(json.dumps({label: [name, config["solver"]["linear_solver_presets"][name]]
                                                  for label, name in config["increment_benchmark"]["solvers"].items()})),
         new_solver=config.get("increment_benchmark", {}).get("new_solver", ""),
+        methods=" ".join(config.get("increment_benchmark", {}).get("methods", ["fem", "ifenn-verified"])),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
     # all cores: nothing else runs while it measures (the benchmark itself uses one)
     threads: all_cores
@@ -120,7 +121,7 @@ rule increment_benchmark:
     shell:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
         " --solvers {params.solvers} --new-solver {params.new_solver} --process-zone {params.zone}"
-        " --increments {params.increments} --out {output} > {log} 2>&1"
+        " --methods {params.methods} --increments {params.increments} --out {output} > {log} 2>&1"
 
 
 rule reference_convergence:
