@@ -6,11 +6,12 @@ the FEM run's fields.h5) and takes the same loads. The pairs advance in turn, on
 (A, B, C, ..., A, B, C, ...), so a load on the machine that comes and goes falls on all of them
 alike: compare the rows of one run as ratios, not their seconds across runs or machines.
 
-Methods (METHODS: name -> phase-field step factory; a new method, e.g. the verified IFENN step,
-is one more entry): ``fem`` (the Q1 phase-field solve), ``ifenn`` (the PICNN on the process
-zone, ``inference: process_zone``, unchecked) and ``ifenn-verified`` (the run's verified step: the
-process-zone prediction checked by the pixel equation and corrected where it fails). Solvers: the config's ``solvers`` map, a column label -> a
-linear-solver preset (``gamg`` -> ``iterative``, today's default; ``direct``; ``gamg-reuse``).
+Methods (METHODS: name -> phase-field step factory; a new method is one more entry): ``fem``
+(the Q1 phase-field solve), ``ifenn`` (the PICNN on the process zone, ``inference:
+process_zone``, unchecked) and ``ifenn-verified`` (the run's verified step: the process-zone
+prediction checked by the pixel equation and corrected where it fails). Solvers: the config's
+``solvers`` map, a column label -> a linear-solver preset (``gamg`` -> ``iterative``, today's
+default; ``direct``; ``gamg-reuse``).
 
 Columns (one row per run, method, solver): the mean seconds per increment of the displacement
 solve (assembly included), of the phase-field step and of the whole increment; and
@@ -152,9 +153,10 @@ def ratios(table: pd.DataFrame, solver: str) -> pd.DataFrame:
         row = {"run": run}
         for method in table.method.unique():
             row[f"{method}_displacement_gamg_over_{solver}"] = t.loc[(run, method, "gamg"), "t_displacement_s"] / t.loc[(run, method, solver), "t_displacement_s"]
-        for method in sorted(set(table.method) - {"fem"}) if "fem" in set(table.method) else []:
-            row[f"increment_fem_over_{method}_{solver}"] = (t.loc[(run, "fem", solver), "t_increment_s"]
-                                                            / t.loc[(run, method, solver), "t_increment_s"])
+        if "fem" in set(table.method):
+            for method in sorted(set(table.method) - {"fem"}):
+                row[f"increment_fem_over_{method}_{solver}"] = (t.loc[(run, "fem", solver), "t_increment_s"]
+                                                                / t.loc[(run, method, solver), "t_increment_s"])
         out.append(row)
     return pd.DataFrame(out)
 

@@ -271,10 +271,8 @@ def _semantic_problems(config: dict) -> list[str]:
         for run in bench["runs"]:
             if run not in config.get("ifenn_runs", {}):
                 problems.append(f"config key 'increment_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
-            elif "ifenn-verified" in bench.get("methods", ["ifenn-verified"]):
-                verified = (config["ifenn_runs"][run].get("verification") or {}).get(
-                    "enabled", (config["ifenn"].get("verification") or {}).get("enabled", False))
-                if not verified:
+            elif "ifenn-verified" in bench["methods"]:
+                if not {**config["ifenn"]["verification"], **config["ifenn_runs"][run].get("verification", {})}["enabled"]:
                     problems.append(f"config key 'increment_benchmark.runs': '{run}' is not a verified IFENN run "
                                     "(verification.enabled), which method 'ifenn-verified' times")
         for label, preset in bench["solvers"].items():

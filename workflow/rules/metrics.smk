@@ -110,7 +110,7 @@ rule increment_benchmark:
         solvers=lambda w: json.dumps(json.dumps({label: [name, config["solver"]["linear_solver_presets"][name]]
                                                  for label, name in config["increment_benchmark"]["solvers"].items()})),
         new_solver=config.get("increment_benchmark", {}).get("new_solver", ""),
-        methods=" ".join(config.get("increment_benchmark", {}).get("methods", ["fem", "ifenn-verified"])),
+        methods=" ".join(config.get("increment_benchmark", {}).get("methods", [])),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
     # all cores: nothing else runs while it measures (the benchmark itself uses one)
     threads: all_cores
