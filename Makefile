@@ -5,7 +5,9 @@
 SHELL := /bin/bash
 VENV := .venv
 STAMP := $(VENV)/.installed
-APT_PACKAGES := python3-dolfinx-real python3-venv python3-h5py openmpi-bin g++
+# libopenblas0-serial: PETSc's BLAS/LAPACK (Debian's alternatives pick it over the reference BLAS);
+# MUMPS's dense fronts are about 3x faster with it (environment-notes.md, eighth session)
+APT_PACKAGES := python3-dolfinx-real python3-venv python3-h5py openmpi-bin g++ libopenblas0-serial
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 WHEELS := $(wildcard /opt/wheels)
 ARGS ?=
