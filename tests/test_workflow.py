@@ -181,15 +181,20 @@ def test_quick_profile_whole_path(quick_workflow):
 
 
 def test_quick_profile_reference_convergence(quick_workflow):
-    """Through the DAG, on the quick scene (40 x 40 against 80 x 80): FEM at h misses the finer FEM
-    after the peak (measured 1.0 % / 0.9 % of the peak on schedules II / III), and every verified and
-    whole-path run is nearer the finer FEM than FEM at h is (measured 0.47-0.86 %): the pixel
-    equation on the Gauss-point grid resolves the phase field at h/2. Paper scale: README."""
+    """Through the DAG, on the quick scenes (against twice the elements): FEM at h misses the finer
+    FEM after the peak (measured 1.0 / 0.9 / 1.6 / 1.7 % of the peak on snt1-II / snt1-III / sdnt /
+    adnt), every whole-path run is nearer the finer FEM than FEM at h is (0.42-1.29 %), and so is
+    every verified snt1 run (0.67-0.86 %): the pixel equation on the Gauss-point grid resolves the
+    phase field at h/2. A verified run that switches late follows FEM at h after the switch (adnt:
+    0.03 % apart) and is then as far from the finer FEM as FEM is, never farther. Paper scale: README."""
     table = pd.read_csv(results := quick_workflow / "results" / "tables" / "reference_convergence.csv", keep_default_na=False)
-    assert set(table.case) == {"snt1-II", "snt1-III"}
+    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt"}
     fem = table[table.method == "fem"].set_index("case")
     assert (fem.rms_vs_fine > 0.003).all() and (fem.peak_force_fine < fem.peak_force).all()  # a coarser AT2 mesh is tougher
     runs = table[table.method == "ifenn"]
-    assert set(runs.run) == {"snt1-II-verified", "snt1-II-whole", "snt1-III-verified", "snt1-III-whole"}
-    assert runs.closer_to_fine.all() and (runs.rms_vs_fine < fem.loc[runs.case, "rms_vs_fine"].to_numpy()).all()
+    assert set(runs.run) == {f"{case}-{kind}" for case in fem.index for kind in ("verified", "whole")}
+    fem_rms = fem.loc[runs.case, "rms_vs_fine"].to_numpy()
+    assert (runs.rms_vs_fine.to_numpy() <= fem_rms + 1e-3).all()
+    whole, snt1 = runs.run.str.endswith("-whole").to_numpy(), runs.case.str.startswith("snt1").to_numpy()
+    assert runs[whole | snt1].closer_to_fine.all() and (runs.rms_vs_fine.to_numpy() < fem_rms)[whole | snt1].all()
     assert (results.parent.parent / "figures" / "reference_convergence.png").stat().st_size > 10_000
