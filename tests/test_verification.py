@@ -145,8 +145,14 @@ def test_a_spoiled_network_is_corrected_step_after_step_on_a_growing_crack():
         "full": lambda: VerifiedInference(FullInference(OrbitEvaluator(net, tile=64).predict, None), PixelEquation(GC, LC, H_PX),
                                           tolerance),
         "zone": lambda: VerifiedInference(ProcessZoneInference(OrbitEvaluator(net, tile=64), None, tolerance=3e-3,
-                                                               local_scale=GC / LC), PixelEquation(GC, LC, H_PX), tolerance),
+                                                               local_scale=GC / LC), PixelEquation(GC, LC, H_PX), tolerance,
+                                          warm_start="network"),
         "previous": lambda: VerifiedInference(None, PixelEquation(GC, LC, H_PX), tolerance, warm_start="previous"),
+        # the default: the network's change added to the last verified phi, the network asked again
+        # only where the input's local phi moved by 0.1 (the runs' network_tolerance)
+        "increment": lambda: VerifiedInference(ProcessZoneInference(OrbitEvaluator(net, tile=64), None, tolerance=0.1,
+                                                                    local_scale=GC / LC), PixelEquation(GC, LC, H_PX), tolerance,
+                                               warm_start="increment"),
     }
     for name, make in engines.items():
         verified = make()

@@ -53,7 +53,10 @@ def test_whole_path_verified_ifenn_reaches_fem_peak(fem_run, quick_config, tmp_p
     spec = ifenn_run_spec(quick_config, "snt1-II-whole")
     model = _random_model(spec, tmp_path / "random.pt")
     whole = pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", None, model, tmp_path / "whole", progress=False))
-    assert len(whole) == len(fem) and (whole.hybrid_active == 1).all() and (whole.t_inference_s > 0).all()
+    assert len(whole) == len(fem) and (whole.hybrid_active == 1).all()
+    # the network predicts from the first increment on, and again wherever the input moved by the
+    # verification's network_tolerance (not every increment: elsewhere the last verified phi stays)
+    assert whole.t_inference_s.iloc[0] > 0 and (whole.evaluated_fraction > 0).sum() >= 5
     np.testing.assert_allclose(whole.u, fem.u)
     assert (whole.verify_residual_after <= spec["verification"]["tolerance"]).all()
     row = whole_path_comparison(fem, whole, spec["switch_phi_max"])

@@ -73,7 +73,7 @@ def test_quick_profile_issue5_results(quick_workflow):
     assert set(stability.label) <= {"ok", "peak off", "crack path wrong", "no load drop", "diverged"}
     speed = pd.read_csv(results / "benchmarks" / "phase_field_speed.csv")
     assert set(speed.method) == {"fem", "ifenn_full_convolution", "ifenn_full", "ifenn_process_zone", "ifenn_verified",
-                                 "ifenn_verified_nonet"} and (speed.t_phase_field_s > 0).all()
+                                 "ifenn_verified_network", "ifenn_verified_nonet"} and (speed.t_phase_field_s > 0).all()
     verified = speed[speed.method.str.startswith("ifenn_verified")]
     assert (verified.verify_residual_after_max <= 1e-3).all()
     # the orbit evaluation is the same network: the same forces as the convolutions

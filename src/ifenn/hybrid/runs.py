@@ -83,7 +83,13 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
         warm_start = verification["warm_start"]
-        network = _network_inference(spec, model_path, h_px, shape) if warm_start != "previous" else None
+        network = None
+        if warm_start != "previous":
+            # the network only warm-starts a certified correction: how often it is asked is its own setting
+            zone = spec["process_zone"]
+            if verification.get("network_tolerance") is not None:
+                zone = {**zone, "tolerance": verification["network_tolerance"]}
+            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape)
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         return VerifiedInference(network, PixelEquation(Gc, lc, h_px, spec["pixel_padding"]), verification["tolerance"],
                                  verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start)

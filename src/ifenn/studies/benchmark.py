@@ -22,13 +22,16 @@ from pathlib import Path
 import pandas as pd
 
 #: method -> overrides of the IFENN run spec (None: the FEM step). The verified methods check
-#: every prediction by the pixel equation and correct it (ifenn.hybrid.verification), with the network
-#: as the warm start or with the last verified phi only (no network: what the network saves).
+#: every prediction by the pixel equation and correct it (ifenn.hybrid.verification): with the configured
+#: warm start (ifenn.verification), with the network's prediction wherever it changed on the process
+#: zone's tolerance (the first verified step), or with the last verified phi only (no network: what the
+#: network saves).
 _VERIFIED = {"inference": "process_zone", "evaluation": "orbit", "smoothing_sigma": None, "irreversible": False}
 METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluation": "convolution"},
            "ifenn_full": {"inference": "full", "evaluation": "orbit"},
            "ifenn_process_zone": {"inference": "process_zone", "evaluation": "orbit"},
-           "ifenn_verified": {**_VERIFIED, "verification": {"warm_start": "network"}},
+           "ifenn_verified": {**_VERIFIED, "verification": {}},
+           "ifenn_verified_network": {**_VERIFIED, "verification": {"warm_start": "network", "network_tolerance": None}},
            "ifenn_verified_nonet": {**_VERIFIED, "verification": {"warm_start": "previous"}}}
 
 
