@@ -8,6 +8,7 @@ rule fem_spec:
         "results/fem/{run}/spec.json",
     params:
         spec=lambda w: fem_spec_json(w.run),
+    priority: 100  # instant; unlocks its FEM run (mesh.smk)
     log:
         "logs/fem/{run}_spec.log",
     run:

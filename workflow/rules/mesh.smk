@@ -8,6 +8,9 @@ rule mesh:
         meta="results/mesh/{scene}.json",
     params:
         scene=lambda w: config["scenes"][w.scene],
+    # seconds each, and they unlock the FEM runs: a job's priority counts only once it is ready,
+    # so the long FEM runs can start first only when their meshes and specs are already there
+    priority: 100
     conda:
         "../envs/ifenn.yaml"
     log:
