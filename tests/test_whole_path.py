@@ -114,3 +114,22 @@ def test_history_notch_fires_the_threshold_at_the_first_increment(quick_config, 
     record = _provenance(tmp_path / "notch")
     assert record["criterion"] == "phi_threshold" and record["fem_increments"] == 1 and record["fired_at_first_increment"]
     assert "history notch" in record["note"]
+
+
+def test_the_verified_step_asks_the_network_on_its_own_tolerance(quick_config, tmp_path):
+    """verification.network_tolerance sets how far an input moves before the network predicts it
+    again (null: the process zone's tolerance); with warm_start 'previous' there is no network."""
+    from ifenn.hybrid.runs import make_inference
+
+    spec = ifenn_run_spec(quick_config, "snt1-II-verified")
+    model = _random_model(spec, tmp_path / "random.pt")
+    h_px = (spec["scene"]["domain"]["x"][1] - spec["scene"]["domain"]["x"][0]) / spec["scene"]["elements"][0] / 2
+    verified = make_inference(spec, model, h_px)
+    assert verified.warm_start == spec["verification"]["warm_start"] == "increment"
+    assert verified.inference.tolerance == spec["verification"]["network_tolerance"] != spec["process_zone"]["tolerance"]
+    inherit = copy.deepcopy(spec)
+    inherit["verification"]["network_tolerance"] = None
+    assert make_inference(inherit, model, h_px).inference.tolerance == spec["process_zone"]["tolerance"]
+    alone = copy.deepcopy(spec)
+    alone["verification"]["warm_start"] = "previous"
+    assert make_inference(alone, model, h_px).inference is None
