@@ -52,14 +52,14 @@ the change, whose error is smaller where the network's error is systematic); ``p
 ignores the network and starts from the last verified phi (the correction alone is then a
 local pixel solver of the changed region). The check itself is the same, and so is the
 result, to the tolerance. What differs is the cost, measured at snt3-II (600 x 600 pixels, 40
-increments of propagation, one core): ``network`` with the network asked on the process zone's
-tolerance (3e-3) needs 4.2 whole-image CG iterations per increment and 0.038 s per step,
-``previous`` 2.6 iterations and 0.017 s, ``increment`` 2.6-2.9 iterations. The network's own
+increments of propagation, one core, the phase-field benchmark): ``network`` with the network
+asked on the process zone's tolerance (3e-3) needs 4.2 whole-image CG iterations per increment
+and 0.040 s per step, ``previous`` 2.6 iterations and 0.018 s, ``increment`` 3.0. The network's own
 error is systematic (a bias of ~0.01 in the far field, pixel-scale roughness that the check
 amplifies by (lc/h_px)^2), so its prediction is a worse start than the last verified phi
 wherever phi moves less than that; its change is not. Hence the default: ``increment``, with
 the network asked again only where a pixel's local phase field moved by ``network_tolerance``
-(0.1: the crack tip; 0.022 s per step at snt3, the network 0.003 s of it).
+(0.1: the crack tip; 0.025 s per step at snt3, the network 0.004 s of it).
 
 Cost. The residual is recomputed only where its inputs changed: pixels whose capped H or
 whose candidate phi changed, and their 8 neighbours; elsewhere it is the one that passed
