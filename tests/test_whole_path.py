@@ -14,6 +14,7 @@ from ifenn.config import IFENN_OPTIONS, fem_run_spec, ifenn_run_spec
 from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.fem.solver import run_fem
 from ifenn.hybrid.runs import run_ifenn
+from ifenn.pixels import PixelGrid
 from ifenn.studies.whole_path import whole_path_comparison
 
 #: whole-path verified IFENN against FEM on the quick snt1-II: peak force (measured 0.04 % with the
@@ -35,8 +36,7 @@ def _random_model(spec, path):
 
     torch.manual_seed(0)
     net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
-    h_px = (spec["scene"]["domain"]["x"][1] - spec["scene"]["domain"]["x"][0]) / spec["scene"]["elements"][0] / 2
-    save_picnn(net, path, h_px, spec["material"]["Gc"], spec["material"]["lc"], "test")
+    save_picnn(net, path, PixelGrid.for_scene(spec["scene"]).h_px, spec["material"]["Gc"], spec["material"]["lc"], "test")
     return path
 
 
@@ -123,7 +123,7 @@ def test_the_verified_step_asks_the_network_on_its_own_tolerance(quick_config, t
 
     spec = ifenn_run_spec(quick_config, "snt1-II-verified")
     model = _random_model(spec, tmp_path / "random.pt")
-    h_px = (spec["scene"]["domain"]["x"][1] - spec["scene"]["domain"]["x"][0]) / spec["scene"]["elements"][0] / 2
+    h_px = PixelGrid.for_scene(spec["scene"]).h_px
     verified = make_inference(spec, model, h_px)
     assert verified.warm_start == spec["verification"]["warm_start"] == "increment"
     assert verified.inference.tolerance == spec["verification"]["network_tolerance"] != spec["process_zone"]["tolerance"]
