@@ -113,3 +113,28 @@ def test_switch_over_in_the_specs(paper_config):
     config = validate_config(config)
     assert ifenn_run_spec(config, "snt1-I-at-123")["switch_increment"] == 123
     assert 123 in fem_run_spec(config, "snt1-I")["save_fields"] and 123 not in fem_run_spec(paper_config, "snt1-I")["save_fields"]
+
+
+@pytest.mark.parametrize(
+    "overlay, key",
+    [
+        ("material: {lc: .nan}", "material.lc"),
+        ("material: {Gc: .inf}", "material.Gc"),
+        ("schedules: {I: [{increments: 350, step: .nan}]}", "schedules.I[0].step"),
+        ("ifenn: {verification: {enabled: false, tolerance: .nan}}", "ifenn.verification.tolerance"),
+        ("scenes: {snt1: {domain: {x: [-.inf, 0.5]}}}", "scenes.snt1.domain.x[0]"),
+        ("solver: {linear_solver_presets: {iterative: {displacement: {ksp_rtol: .nan}}}}",
+         "solver.linear_solver_presets.iterative.displacement.ksp_rtol"),
+        ("ifenn: {history_cap: -.inf}", "ifenn.history_cap"),
+    ],
+)
+def test_non_finite_numbers_are_refused_naming_the_key(paper_config, overlay, key):
+    """YAML's .nan and .inf, merged over the paper config as a --configfile overlay would be,
+    are refused before any compute wherever they sit: a NaN fails every range comparison."""
+    import yaml
+
+    from ifenn.config import deep_merge
+
+    with pytest.raises(ConfigError) as info:
+        validate_config(deep_merge(paper_config, yaml.safe_load(overlay)))
+    assert f"config key '{key}'" in str(info.value) and "is not a finite number" in str(info.value), str(info.value)

@@ -11,6 +11,7 @@ import copy
 import functools
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -106,12 +107,25 @@ def _specific(errors):
         yield from (_specific(inner) if inner else [err])
 
 
+def _non_finite(instance: Any, path: tuple = ()) -> list[str]:
+    """Every float of the config that is NaN or infinite (YAML's .nan, .inf), by key. Checked
+    once for all keys, before the schema: a NaN fails every comparison, so a range check
+    (minimum, maximum, a < b) alone would let it through to the solvers."""
+    if isinstance(instance, float) and not math.isfinite(instance):
+        return [f"config key '{_key_path(path)}': {instance!r} is not a finite number"]
+    if isinstance(instance, dict):
+        return [p for key, value in instance.items() for p in _non_finite(value, (*path, key))]
+    if isinstance(instance, list):
+        return [p for i, value in enumerate(instance) for p in _non_finite(value, (*path, i))]
+    return []
+
+
 def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
     """Validate against the JSON schema, fill defaults, then check cross-references and
     geometry. Returns a new, completed config; raises ConfigError listing every problem."""
     schema = _schema(Path(schema_path))
     validator = jsonschema.Draft202012Validator(schema)
-    problems = [
+    problems = _non_finite(config) + [
         f"config key '{_key_path(err.absolute_path)}': {err.message}"
         for err in sorted(_specific(validator.iter_errors(config)), key=lambda e: list(map(str, e.absolute_path)))
     ]

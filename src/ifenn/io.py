@@ -6,10 +6,40 @@ import contextlib
 import json
 import logging
 import os
+import pickle
 import platform
 import sys
 import time
+import zipfile
+import zlib
 from pathlib import Path
+
+
+class CorruptFileError(RuntimeError):
+    """A file that exists but cannot be read: truncated, or overwritten in part."""
+
+
+#: what the readers of the package's files raise on a damaged file (h5py: OSError; torch and
+#: dolfinx: RuntimeError; numpy's .npz: zipfile.BadZipFile, EOFError, ValueError or zlib.error)
+_READ_ERRORS = (OSError, RuntimeError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, pickle.UnpicklingError)
+
+#: how to get a file back that a workflow rule writes
+REBUILD = "delete it and rerun the workflow (Snakemake rebuilds a missing file)"
+
+
+@contextlib.contextmanager
+def reading(path: str | Path, what: str, rebuild: str = REBUILD):
+    """Read ``path`` inside this block: a damaged file ends in one line that names it, says
+    what it is and how to get it back, instead of the reading library's traceback."""
+    try:
+        yield
+    except CorruptFileError:
+        raise
+    except _READ_ERRORS as error:
+        if isinstance(error, FileNotFoundError):
+            raise
+        reason = (str(error).strip().splitlines() or [type(error).__name__])[0]
+        raise CorruptFileError(f"{path}: cannot read this {what}, it is damaged or truncated ({reason}); {rebuild}") from None
 
 
 @contextlib.contextmanager

@@ -12,13 +12,20 @@
                      ``switch_increment`` (-1: the phi threshold was never reached)
     provenance.json  spec hash, software versions, wall time, and what the run adds
     status.json      a stability cell's outcome: ``status`` (ok / failed), ``error``, ``wall_s``
+    .work/           a run in progress: checkpoint.npz (the state to resume from), the saved
+                     increments fields_NNNNNN.npz, and the lock of the process writing the run
 
 Every write is atomic (:func:`ifenn.io.atomic_path`): a file that exists is complete.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
+import os
+import socket
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -26,7 +33,7 @@ import h5py
 import numpy as np
 import pandas as pd
 
-from ifenn.io import atomic_path, write_csv, write_json
+from ifenn.io import atomic_path, reading, write_csv, write_json
 
 SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.h5", "provenance.json", "status.json"
 #: the datasets of a saved increment; the first two are the pixel maps
@@ -34,6 +41,17 @@ FIELD_KEYS = ("history", "phase_field_gp", "phase_field", "displacement")
 MAP_KEYS = FIELD_KEYS[:2]
 #: the pixel grid's root attributes
 GRID_ATTRS = ("x0", "y0", "h_px", "nx_px", "ny_px")
+
+
+#: what a damaged fields.h5 is called in the error
+_FIELDS_WHAT = "run's saved fields (fields.h5)"
+
+
+@contextlib.contextmanager
+def _open_fields(path: str | Path):
+    """A fields.h5 open for reading; a damaged one raises one line naming it (ifenn.io.reading)."""
+    with reading(path, _FIELDS_WHAT), h5py.File(path, "r") as h5:
+        yield h5
 
 
 def _group(increment: int) -> str:
@@ -61,13 +79,13 @@ def write_fields(path: str | Path, attrs: dict, states: Iterable[dict]) -> None:
 
 def fields_attrs(path: str | Path) -> dict:
     """The root attributes of a fields.h5."""
-    with h5py.File(path, "r") as h5:
+    with _open_fields(path) as h5:
         return dict(h5.attrs)
 
 
 def saved_increments(path: str | Path) -> list[int]:
     """The increments a fields.h5 holds, ascending."""
-    with h5py.File(path, "r") as h5:
+    with _open_fields(path) as h5:
         return sorted(_increment(g) for g in h5)
 
 
@@ -77,7 +95,7 @@ def read_states(path: str | Path, increments: Iterable[int] | None = None, keys:
     ``increments``: exactly these (KeyError naming the saved ones if one is missing); else all,
     or those after ``after``."""
     keys = tuple(keys)
-    with h5py.File(path, "r") as h5:
+    with _open_fields(path) as h5:
         saved = sorted(_increment(g) for g in h5)
         if increments is not None:
             wanted = [int(i) for i in increments]
@@ -97,6 +115,66 @@ def read_phase_field_maps(path: str | Path) -> tuple[dict, dict]:
     """{increment: (u, phase_field_gp map)} and the root attrs of a fields.h5."""
     maps = {s["increment"]: (s["u"], s["phase_field_gp"]) for s in read_states(path, keys=("phase_field_gp",))}
     return maps, fields_attrs(path)
+
+
+# --------------------------------------------------------------------------- .work/*.npz
+def write_state(path: str | Path, state: dict) -> None:
+    """A checkpoint or a saved increment of a run in progress (numbers only, .npz)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as stream:
+        np.savez(stream, **state)
+
+
+def read_state(path: str | Path) -> dict:
+    """All arrays of a file of :func:`write_state`; a damaged one raises one line naming it."""
+    rebuild = "delete it: the run then starts again from its first increment (or its switch-over)"
+    with reading(path, "run state of a run in progress (.npz)", rebuild), np.load(path, allow_pickle=False) as data:
+        return {key: data[key] for key in data.files}
+
+
+# --------------------------------------------------------------------------- .work/lock
+WORK, LOCK = ".work", "lock"
+
+
+class RunInProgressError(RuntimeError):
+    """Another process is writing the run directory."""
+
+
+@contextlib.contextmanager
+def exclusive_writer(run_dir: str | Path, comm=None):
+    """Hold the run directory for this process while the block runs; a second process on the
+    same run refuses at once, naming the holder. The lock is ``flock`` on ``.work/lock``: the
+    operating system releases it when its holder exits or is killed (kill -9 included), so a
+    dead run never blocks its rerun, and a live one (an orphan of a killed job shell) is never
+    raced by it. With MPI, rank 0 holds it for all ranks."""
+    work = Path(run_dir) / WORK
+    rank0 = comm is None or comm.rank == 0
+    stream, refusal = None, None
+    if rank0:
+        work.mkdir(parents=True, exist_ok=True)
+        stream = open(work / LOCK, "a+")  # noqa: SIM115 (held for the block)
+        try:
+            fcntl.flock(stream, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            stream.seek(0)
+            holder = stream.read().strip() or "another process"
+            stream.close()
+            stream = None
+            refusal = (f"run directory {run_dir} is being written by {holder}: wait for it to finish, or stop that "
+                       "process and rerun (the run resumes from its checkpoint)")
+        else:
+            stream.seek(0)
+            stream.truncate()
+            stream.write(f"pid {os.getpid()} on {socket.gethostname()} since {time.strftime('%Y-%m-%d %H:%M:%S')}\n")
+            stream.flush()
+    if comm is not None:
+        refusal = comm.bcast(refusal, root=0)
+    if refusal:
+        raise RunInProgressError(refusal)
+    try:
+        yield
+    finally:
+        if stream is not None:
+            stream.close()
 
 
 # --------------------------------------------------------------------------- the others

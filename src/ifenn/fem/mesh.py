@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ifenn.io import atomic_path
+from ifenn.io import atomic_path, reading
 
 
 @dataclass
@@ -148,5 +148,7 @@ def read_dolfinx_mesh(xdmf_path: str | Path, comm=None):
     from dolfinx import io
     from mpi4py import MPI
 
-    with io.XDMFFile(comm or MPI.COMM_WORLD, str(xdmf_path), "r") as stream:
+    if not Path(xdmf_path).exists():
+        raise FileNotFoundError(f"no mesh file {xdmf_path}")
+    with reading(f"{xdmf_path} (with its .h5)", "mesh"), io.XDMFFile(comm or MPI.COMM_WORLD, str(xdmf_path), "r") as stream:
         return stream.read_mesh(name="Grid")

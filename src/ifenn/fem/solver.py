@@ -29,7 +29,7 @@ from mpi4py import MPI
 from ifenn import run_files
 from ifenn.config import spec_hash
 from ifenn.fem.loading import largest_change, load_control
-from ifenn.io import atomic_path, progress_bar, provenance
+from ifenn.io import progress_bar, provenance
 
 if TYPE_CHECKING:
     from ifenn.fem.loading import LoadControl
@@ -96,12 +96,6 @@ class Clock:
         return time.perf_counter() - self._start
 
 
-def _write_checkpoint(path: Path, state: dict) -> None:
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as stream:
-            np.savez(stream, **state)
-
-
 class StaggeredRun:
     """One run: a problem, a phase-field step, a load list and an output directory."""
 
@@ -152,11 +146,11 @@ class StaggeredRun:
         path = self.work_dir / "checkpoint.npz"
         found = None
         if self.rank0 and path.exists():
-            with np.load(path, allow_pickle=False) as data:
-                if str(data["spec_hash"]) == self.hash:
-                    found = {k: data[k] for k in data.files}
-                else:
-                    log.warning("ignoring checkpoint of another configuration (%s)", path)
+            data = run_files.read_state(path)
+            if str(data["spec_hash"]) == self.hash:
+                found = data
+            else:
+                log.warning("ignoring checkpoint of another configuration (%s)", path)
         found_flag = self.comm.bcast(found is not None, root=0)
         if not found_flag:
             if self.start is None:
@@ -184,13 +178,13 @@ class StaggeredRun:
         state = self._state()
         if self.rank0:
             rows = np.array([[row[c] for c in self.columns] for row in self.rows], dtype=float)
-            _write_checkpoint(self.work_dir / "checkpoint.npz",
+            run_files.write_state(self.work_dir / "checkpoint.npz",
                               {**state, **self.loads.state(), "rows": rows, "increment": increment, "spec_hash": self.hash})
 
     def _snapshot(self, increment: int, u: float) -> None:
         state = self._state()
         if self.rank0:
-            _write_checkpoint(self.work_dir / f"fields_{increment:06d}.npz", {**state, "u": u, "increment": increment})
+            run_files.write_state(self.work_dir / f"fields_{increment:06d}.npz", {**state, "u": u, "increment": increment})
 
     # ------------------------------------------------------------- loop
     def run(self) -> list[dict]:
@@ -314,8 +308,8 @@ class StaggeredRun:
     def _write_fields(self) -> None:
         def states():
             for path in self._snapshots():
-                with np.load(path) as data:
-                    yield {key: data[key] for key in ("increment", "u", *run_files.FIELD_KEYS)}
+                data = run_files.read_state(path)
+                yield {key: data[key] for key in ("increment", "u", *run_files.FIELD_KEYS)}
 
         attrs = {**self.problem.pixels.attrs(), "run": self.spec["name"], "spec_hash": self.hash,
                  "switch_increment": self.switch_increment or -1}
@@ -335,7 +329,7 @@ class StaggeredRun:
         with io.XDMFFile(self.comm, str(tmp_dir / "paraview.xdmf"), "w") as xdmf:
             xdmf.write_mesh(p.domain)
             for path in snapshots:
-                data = dict(np.load(path)) if self.rank0 else None
+                data = run_files.read_state(path) if self.rank0 else None
                 self.u_map.scatter(data["displacement"] if data else None, p.displacement)
                 self.phi_map.scatter(data["phase_field"] if data else None, p.phase_field)
                 u = self.comm.bcast(float(data["u"]) if data else None, root=0)
@@ -355,6 +349,7 @@ def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bo
     from ifenn.fem.problem import FractureProblem
 
     comm = MPI.COMM_WORLD
-    domain = read_dolfinx_mesh(mesh_path, comm)
-    problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress).run()
+    with run_files.exclusive_writer(out_dir, comm):
+        domain = read_dolfinx_mesh(mesh_path, comm)
+        problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
+        return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress).run()

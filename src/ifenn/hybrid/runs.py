@@ -137,7 +137,15 @@ def _network_inference(spec: dict, model_path, h_px: float, shape):
 def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True) -> list[dict]:
     """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN (by the
     spec's ``switch_over`` criterion, module doc); with ``switch_over: start`` from the scene's
-    initial state, and ``fem_dir`` is not read (it may be None)."""
+    initial state, and ``fem_dir`` is not read (it may be None). One process at a time writes
+    ``out_dir`` (:func:`ifenn.run_files.exclusive_writer`)."""
+    from ifenn.run_files import exclusive_writer
+
+    with exclusive_writer(out_dir, MPI.COMM_WORLD):
+        return _run_ifenn(spec, mesh_path, fem_dir, model_path, out_dir, progress)
+
+
+def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool) -> list[dict]:
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.problem import FractureProblem
     from ifenn.fem.solver import StaggeredRun

@@ -34,7 +34,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ifenn.config import schema_default
-from ifenn.io import atomic_path
+from ifenn.io import atomic_path, reading
 
 #: Laplacian stencil K9* of the paper (section "PICNN training"); its weights sum to 3.
 LAPLACIAN_K9_STAR = np.array([[0.25, 0.5, 0.25], [0.5, 0.0, 0.5], [0.25, 0.5, 0.25]])
@@ -480,7 +480,8 @@ def load_picnn(path: str | Path) -> tuple[PICNN, dict]:
 
     Returns (model in eval mode, metadata dict with h_px, Gc, lc, config_hash, extra, ...).
     """
-    payload = torch.load(Path(path), map_location="cpu", weights_only=True)
+    with reading(path, "trained PICNN (torch file of ifenn.network.picnn.save_picnn)"):
+        payload = torch.load(Path(path), map_location="cpu", weights_only=True)
     model = PICNN(
         channels=tuple(payload["channels"]),
         kernel_size=payload["kernel_size"],

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 from ifenn import run_files
-from ifenn.io import atomic_path
+from ifenn.io import atomic_path, reading
 
 
 def extract_training_data(fields_path: str | Path, increments: list[int], out_path: str | Path) -> None:
@@ -30,7 +30,7 @@ def extract_training_data(fields_path: str | Path, increments: list[int], out_pa
 
 
 def read_training_data(path: str | Path) -> dict:
-    with h5py.File(path, "r") as h5:
+    with reading(path, "training data (.h5)"), h5py.File(path, "r") as h5:
         data = {key: h5[key][()] for key in h5}
         data.update({key: h5.attrs[key] for key in h5.attrs})
     return data

@@ -1,0 +1,121 @@
+"""The files of a run: a damaged model, mesh, fields.h5 or checkpoint ends in one line that
+names the file and how to get it back; one process at a time writes a run directory."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from ifenn import run_files
+from ifenn.io import CorruptFileError
+from ifenn.run_files import RunInProgressError, exclusive_writer
+
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
+
+
+def _truncate(path, keep=0.5):
+    data = path.read_bytes()
+    path.write_bytes(data[: int(len(data) * keep)])
+
+
+def _overwrite_middle(path, size=4096):
+    data = bytearray(path.read_bytes())
+    start = len(data) // 3
+    data[start:start + size] = os.urandom(min(size, len(data) - start))
+    path.write_bytes(bytes(data))
+
+
+def _assert_one_line_naming(info, path, rebuild):
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message and rebuild in message, message
+    assert info.value.__cause__ is None and info.value.__suppress_context__, "the library's traceback is dropped"
+
+
+def test_truncated_model_names_the_file(tmp_path):
+    from ifenn.network.picnn import PICNN, load_picnn, save_picnn
+
+    path = tmp_path / "model.pt"
+    save_picnn(PICNN(), path, h_px=0.0025, Gc=2.7, lc=0.015, config_hash="x")
+    load_picnn(path)  # intact: reads
+    _truncate(path)
+    with pytest.raises(CorruptFileError) as info:
+        load_picnn(path)
+    _assert_one_line_naming(info, path, "rerun the workflow")
+
+
+def test_mesh_overwritten_in_part_names_the_file(quick_config, tmp_path):
+    from ifenn.fem.mesh import build_mesh, read_dolfinx_mesh, write_mesh
+
+    path = tmp_path / "snt-small.xdmf"
+    write_mesh(build_mesh(quick_config["scenes"]["snt-small"]), path)
+    assert read_dolfinx_mesh(path).topology.index_map(2).size_local == 16 * 16
+    _overwrite_middle(path.with_suffix(".h5"))
+    with pytest.raises(CorruptFileError) as info:
+        read_dolfinx_mesh(path)
+    _assert_one_line_naming(info, path, "rerun the workflow")
+    with pytest.raises(FileNotFoundError, match="no mesh file"):
+        read_dolfinx_mesh(tmp_path / "missing.xdmf")
+
+
+def test_truncated_fields_names_the_file(tmp_path):
+    path = tmp_path / "fields.h5"
+    state = {"increment": 3, "u": 1e-3, "history": np.ones((40, 40)), "phase_field_gp": np.zeros((40, 40)),
+             "phase_field": np.zeros(81), "displacement": np.zeros((81, 2))}
+    run_files.write_fields(path, {"run": "x"}, [state])
+    assert run_files.saved_increments(path) == [3]
+    _truncate(path, keep=0.3)
+    for read in (run_files.saved_increments, run_files.fields_attrs, run_files.read_states):
+        with pytest.raises(CorruptFileError) as info:
+            read(path)
+        _assert_one_line_naming(info, path, "rerun the workflow")
+
+
+def test_damaged_checkpoint_names_the_file(tmp_path):
+    path = tmp_path / "checkpoint.npz"
+    run_files.write_state(path, {"increment": 7, "rows": np.random.default_rng(0).random((200, 20))})
+    assert int(run_files.read_state(path)["increment"]) == 7
+    _truncate(path, keep=0.6)
+    with pytest.raises(CorruptFileError) as info:
+        run_files.read_state(path)
+    _assert_one_line_naming(info, path, "starts again from its first increment")
+
+
+HOLD = """
+import sys, time
+from ifenn.run_files import exclusive_writer
+with exclusive_writer(sys.argv[1]):
+    print("holding", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_a_second_writer_refuses_at_once_naming_the_holder(quick_spec, tmp_path):
+    """A run in progress (here a process that holds the lock, as an orphaned run would) makes
+    a second run on the same directory refuse before it reads or writes anything; once the
+    holder dies (kill -9: no clean-up of its own), the directory is free again."""
+    from ifenn.fem.solver import run_fem
+
+    run_dir = tmp_path / "run"
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(run_dir)], env=ENV, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "holding"
+        (run_dir / ".work" / "checkpoint.npz").write_bytes(b"the holder's")
+        with pytest.raises(RunInProgressError, match=rf"is being written by pid {holder.pid} on .*wait for it to finish"):
+            # the mesh does not exist: the refusal comes before anything is read
+            run_fem(quick_spec("snt1-I"), tmp_path / "no-mesh.xdmf", run_dir, progress=False)
+        assert (run_dir / ".work" / "checkpoint.npz").read_bytes() == b"the holder's"  # untouched
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+    deadline = time.time() + 10
+    while True:
+        try:
+            with exclusive_writer(run_dir):
+                break
+        except RunInProgressError:
+            assert time.time() < deadline, "the lock of a killed process must be released by the system"
+            time.sleep(0.05)
