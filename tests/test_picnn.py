@@ -286,3 +286,20 @@ def test_kernel_can_be_turned_off_and_is_rebuilt_where_the_cache_is(monkeypatch,
         np.testing.assert_allclose(evaluator.predict(history), OrbitEvaluator(net, kernel="torch").predict(history), atol=2e-6, rtol=0)
     finally:
         orbit_kernel.load.cache_clear()
+
+
+def test_torch_comes_before_dolfinx_and_only_where_needed():
+    """torch is imported before dolfinx's stack in any process that loads both (else dolfinx's
+    BLAS serves torch.mm, ~13x slower), and not at all by the figure and table adapters."""
+    import subprocess
+    import sys
+
+    def modules(code):
+        return subprocess.run([sys.executable, "-c", f"{code}; import sys; print(' '.join(sys.modules))"], check=True,
+                              capture_output=True, text=True).stdout.split()
+
+    loaded = modules("import ifenn.fem.mesh; import dolfinx")
+    assert loaded.index("torch") < loaded.index("dolfinx")
+    loaded = modules("import ifenn.config; from petsc4py import PETSc")
+    assert loaded.index("torch") < loaded.index("petsc4py")
+    assert "torch" not in modules("import ifenn.studies.plots, ifenn.run_files, ifenn.config")

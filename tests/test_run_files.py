@@ -5,7 +5,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -111,11 +110,5 @@ def test_a_second_writer_refuses_at_once_naming_the_holder(quick_spec, tmp_path)
     finally:
         holder.send_signal(signal.SIGKILL)
         holder.wait()
-    deadline = time.time() + 10
-    while True:
-        try:
-            with exclusive_writer(run_dir):
-                break
-        except RunInProgressError:
-            assert time.time() < deadline, "the lock of a killed process must be released by the system"
-            time.sleep(0.05)
+    with exclusive_writer(run_dir):  # the system released the killed holder's lock
+        pass

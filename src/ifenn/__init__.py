@@ -17,10 +17,29 @@ without it.
 
 __version__ = "0.1.0"
 
-# torch before dolfinx, in every process: dolfinx's libraries are opened RTLD_GLOBAL, and
-# once they are loaded their BLAS serves torch's own matrix products (torch.mm ~13x slower
-# here, measured; the convolutions, done by oneDNN, are not affected). Costs ~1.5 s per process.
-try:
-    import torch  # noqa: F401
-except ImportError:  # the config and mesh parts work without torch
-    pass
+import importlib.abc
+import sys
+
+#: the modules that load PETSc's and dolfinx's shared libraries
+_DOLFINX_STACK = frozenset({"dolfinx", "petsc4py", "basix", "ffcx"})
+
+
+class _TorchBeforeDolfinx(importlib.abc.MetaPathFinder):
+    """torch before dolfinx, in every process that imports both: dolfinx's libraries are opened
+    RTLD_GLOBAL, and once they are loaded their BLAS serves torch's own matrix products (torch.mm
+    ~13x slower here, measured; the convolutions, done by oneDNN, are not affected). torch costs
+    ~1.5 s per process, so it is imported only when the first of dolfinx's stack is, not by every
+    figure or table job (most of the quick DAG's jobs)."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name.partition(".")[0] in _DOLFINX_STACK and "torch" not in sys.modules:
+            sys.meta_path.remove(self)
+            try:
+                import torch  # noqa: F401
+            except ImportError:  # the config and mesh parts work without torch
+                pass
+        return None  # the ordinary finders import the module itself
+
+
+if "torch" not in sys.modules and not any(name in sys.modules for name in _DOLFINX_STACK):
+    sys.meta_path.insert(0, _TorchBeforeDolfinx())

@@ -3,6 +3,7 @@
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] --out DIR
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
+  python -m ifenn stage-times [WORKDIR]   what a workflow run spent per stage (its benchmark files)
 """
 
 from __future__ import annotations
@@ -33,7 +34,14 @@ def main(argv=None) -> int:
     cell.add_argument("--out", required=True)
     cell.add_argument("--fem-dir", default=None)
     cell.add_argument("--model", default=None)
+    times = sub.add_parser("stage-times", help="sum the workflow's benchmark files (benchmarks/<stage>/*.tsv) by stage")
+    times.add_argument("workdir", nargs="?", default=".", help="the workflow's working directory (default: here)")
     args = parser.parse_args(argv)
+    if args.command == "stage-times":
+        from ifenn.studies.stage_times import stage_times
+
+        print(stage_times(args.workdir).to_markdown(index=False) if _has_tabulate() else stage_times(args.workdir).to_string(index=False))
+        return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
@@ -59,6 +67,12 @@ def main(argv=None) -> int:
         status = run_cell(spec, args.out, args.fem_dir, args.model)
         logging.getLogger("ifenn").info("cell %s: %s", spec["name"], status)
     return 0
+
+
+def _has_tabulate() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("tabulate") is not None
 
 
 if __name__ == "__main__":

@@ -11,10 +11,12 @@ rule fem_spec:
     priority: 100  # instant; unlocks its FEM run (mesh.smk)
     log:
         "logs/fem/{run}_spec.log",
-    run:
-        from ifenn.io import write_json
-
-        write_json(output[0], json.loads(params.spec))
+    benchmark:
+        "benchmarks/specs/fem_{run}.tsv"
+    conda:
+        "../envs/ifenn.yaml"
+    script:
+        "../scripts/write_spec.py"
 
 
 rule fem:
@@ -62,5 +64,7 @@ rule fem_force_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/fem_{run}.log",
+    benchmark:
+        "benchmarks/figures/fem_{run}.tsv"
     script:
         "../scripts/fem_force_figure.py"

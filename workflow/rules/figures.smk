@@ -12,6 +12,8 @@ rule comparison_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/comparison_{run}.log",
+    benchmark:
+        "benchmarks/figures/comparison_{run}.tsv"
     script:
         "../scripts/comparison_figure.py"
 
@@ -27,6 +29,8 @@ rule views_3d_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/views_3d.log",
+    benchmark:
+        "benchmarks/figures/views_3d.tsv"
     script:
         "../scripts/views_3d_figure.py"
 
@@ -43,6 +47,8 @@ rule mesh_study_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/mesh_study.log",
+    benchmark:
+        "benchmarks/figures/mesh_study.tsv"
     script:
         "../scripts/mesh_study_figure.py"
 
@@ -59,5 +65,7 @@ rule phase_field_time_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/phase_field_time.log",
+    benchmark:
+        "benchmarks/figures/phase_field_time.tsv"
     script:
         "../scripts/phase_field_time_figure.py"

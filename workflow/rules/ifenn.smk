@@ -10,10 +10,12 @@ rule ifenn_spec:
         spec=lambda w: json.dumps(ifenn_run_spec(config, w.run), sort_keys=True),
     log:
         "logs/ifenn/{run}_spec.log",
-    run:
-        from ifenn.io import write_json
-
-        write_json(output[0], json.loads(params.spec))
+    benchmark:
+        "benchmarks/specs/ifenn_{run}.tsv"
+    conda:
+        "../envs/ifenn.yaml"
+    script:
+        "../scripts/write_spec.py"
 
 
 rule ifenn:
@@ -59,5 +61,7 @@ rule ifenn_force_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/ifenn_{run}.log",
+    benchmark:
+        "benchmarks/figures/ifenn_{run}.tsv"
     script:
         "../scripts/ifenn_force_figure.py"

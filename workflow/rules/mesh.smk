@@ -15,6 +15,8 @@ rule mesh:
         "../envs/ifenn.yaml"
     log:
         "logs/mesh/{scene}.log",
+    benchmark:
+        "benchmarks/mesh/{scene}.tsv"
     script:
         "../scripts/mesh.py"
 
@@ -30,5 +32,7 @@ rule mesh_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/mesh/{scene}_figure.log",
+    benchmark:
+        "benchmarks/mesh/{scene}_figure.tsv"
     script:
         "../scripts/mesh_figure.py"

@@ -14,6 +14,8 @@ rule accuracy_table:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/accuracy.log",
+    benchmark:
+        "benchmarks/tables/accuracy.tsv"
     script:
         "../scripts/accuracy_table.py"
 
@@ -30,6 +32,8 @@ rule timing_table:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/timing.log",
+    benchmark:
+        "benchmarks/tables/timing.tsv"
     script:
         "../scripts/timing_table.py"
 
@@ -46,6 +50,8 @@ rule process_zone_table:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/process_zone.log",
+    benchmark:
+        "benchmarks/tables/process_zone.tsv"
     script:
         "../scripts/process_zone_table.py"
 
@@ -64,6 +70,8 @@ rule speed_accuracy:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/speed_accuracy.log",
+    benchmark:
+        "benchmarks/tables/speed_accuracy.tsv"
     script:
         "../scripts/speed_accuracy.py"
 
@@ -87,6 +95,8 @@ rule phase_field_benchmark:
         "../envs/ifenn.yaml"
     log:
         "logs/benchmarks/phase_field_speed.log",
+    benchmark:
+        "benchmarks/speed/phase_field_speed.tsv"
     shell:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model}"
         " --specs {input.ifenn_specs} --increments {params.increments} --process-zone {params.zone}"
@@ -118,6 +128,8 @@ rule increment_benchmark:
         "../envs/ifenn.yaml"
     log:
         "logs/benchmarks/increment_speed.log",
+    benchmark:
+        "benchmarks/speed/increment_speed.tsv"
     shell:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
         " --solvers {params.solvers} --new-solver {params.new_solver} --process-zone {params.zone}"
@@ -137,5 +149,7 @@ rule reference_convergence:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/reference_convergence.log",
+    benchmark:
+        "benchmarks/tables/reference_convergence.tsv"
     script:
         "../scripts/reference_convergence.py"

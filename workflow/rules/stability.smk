@@ -11,10 +11,12 @@ rule stability_cell_spec:
         cell="(fem|ifenn)_[A-Za-z0-9_.+-]+",
     log:
         "logs/stability/{cell}_spec.log",
-    run:
-        from ifenn.io import write_json
-
-        write_json(output[0], json.loads(params.spec))
+    benchmark:
+        "benchmarks/specs/stability_{cell}.tsv"
+    conda:
+        "../envs/ifenn.yaml"
+    script:
+        "../scripts/write_spec.py"
 
 
 rule stability_cell:
@@ -37,6 +39,8 @@ rule stability_cell:
         "../envs/ifenn.yaml"
     log:
         "logs/stability/{cell}.log",
+    benchmark:
+        "benchmarks/stability/{cell}.tsv"
     shell:
         "OMP_NUM_THREADS=1 {params.python} -m ifenn cell --spec {input.spec} --out {params.out}"
         " {params.fem} {params.model} > {log} 2>&1"
@@ -53,6 +57,8 @@ rule stability_table:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/stability.log",
+    benchmark:
+        "benchmarks/tables/stability.tsv"
     script:
         "../scripts/stability_table.py"
 
@@ -66,5 +72,7 @@ rule stability_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/stability_map.log",
+    benchmark:
+        "benchmarks/figures/stability_map.tsv"
     script:
         "../scripts/stability_figure.py"

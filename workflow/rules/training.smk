@@ -13,6 +13,8 @@ rule training_data:
         "../envs/ifenn.yaml"
     log:
         "logs/training/data.log",
+    benchmark:
+        "benchmarks/training/data.tsv"
     script:
         "../scripts/training_data.py"
 
@@ -73,6 +75,8 @@ rule training_data_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/training_data.log",
+    benchmark:
+        "benchmarks/figures/training_data.tsv"
     script:
         "../scripts/training_data_figure.py"
 
@@ -88,5 +92,7 @@ rule training_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/training.log",
+    benchmark:
+        "benchmarks/figures/training.tsv"
     script:
         "../scripts/training_figure.py"

@@ -20,6 +20,8 @@ rule whole_path_table:
         "../envs/ifenn.yaml"
     log:
         "logs/tables/whole_path.log",
+    benchmark:
+        "benchmarks/tables/whole_path.tsv"
     script:
         "../scripts/whole_path_table.py"
 
@@ -46,6 +48,8 @@ rule whole_run_benchmark:
         "../envs/ifenn.yaml"
     log:
         "logs/benchmarks/whole_run_speed.log",
+    benchmark:
+        "benchmarks/speed/whole_run_speed.tsv"
     shell:
         "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
         " {params.increments} --out {output.summary} --out-increments {output.increments} > {log} 2>&1"
@@ -61,5 +65,7 @@ rule whole_run_speed_figure:
         "../envs/ifenn.yaml"
     log:
         "logs/figures/whole_run_speed.log",
+    benchmark:
+        "benchmarks/figures/whole_run_speed.tsv"
     script:
         "../scripts/whole_run_speed_figure.py"
