@@ -55,8 +55,10 @@ def test_fem_run_saved_states_after_the_switch(case):
 
 
 def test_exact_variant_solves_the_pixel_equation(case):
-    """The exact variant's phi makes the pixel residual vanish on the capped H (to the CG
-    tolerance), and the uncapped one on the uncapped H; both lie in [0, 1]."""
+    """The exact variant's phi makes the pixel residual (the slit's links cut) vanish on the
+    capped H (to the CG tolerance), and the uncapped one on the uncapped H; both lie in [0, 1]."""
+    from ifenn.hybrid.runs import slit_cuts
+
     paths, spec, _ = case
     replay = Replay(spec, paths["mesh"], paths["model"], stagger_max_iterations=5)
     _, _, states = saved_states(paths["fem_dir"] / "fields.h5")
@@ -64,7 +66,8 @@ def test_exact_variant_solves_the_pixel_equation(case):
     for history in (replay.capped(states[-1]["history"]), states[-1]["history"]):
         phi = replay.exact(history)
         as_tensor = (lambda a: torch.as_tensor(a, dtype=torch.float64)[None, None])  # noqa: E731
-        r = residual(as_tensor(phi), as_tensor(history), material["Gc"], material["lc"], replay.h_px, spec["pixel_padding"])
+        r = residual(as_tensor(phi), as_tensor(history), material["Gc"], material["lc"], replay.h_px, spec["pixel_padding"],
+                     slit_cuts(spec))
         assert float(r.norm() / torch.as_tensor(2.0 * history).norm()) < 1e-8
         assert phi.min() >= 0.0 and phi.max() <= 1.0
 

@@ -71,6 +71,16 @@ def switch_record(spec: dict, switch: int, rows: list[dict]) -> dict:
     return record
 
 
+def slit_cuts(spec: dict):
+    """The stencil links the run's slits cut on its pixel grid (:class:`ifenn.pixels.SlitCuts`),
+    for every pixel operator of the run; None where the padding has no pixel equation."""
+    from ifenn.pixels import PixelGrid, SlitCuts
+
+    if spec.get("pixel_padding") not in ("replicate", "zeros"):
+        return None
+    return SlitCuts.for_scene(spec["scene"], PixelGrid.for_scene(spec["scene"]), spec["pixel_padding"])
+
+
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
     checked and corrected by the pixel equation when ``spec['verification']['enabled']``
@@ -91,7 +101,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
             network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape)
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
-        return VerifiedInference(network, PixelEquation(Gc, lc, h_px, spec["pixel_padding"]), verification["tolerance"],
+        equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
+        return VerifiedInference(network, equation, verification["tolerance"],
                                  verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start)
     return _network_inference(spec, model_path, h_px, shape)
 
@@ -130,7 +141,8 @@ def _network_inference(spec: dict, model_path, h_px: float, shape):
         if spec.get("inference", "full") != "full":
             raise ValueError("inference 'process_zone' needs the local PICNN; the exact pixel solve is global: use 'full'")
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
-        return FullInference(lambda history: solve_pixel_equation(history, Gc, lc, h_px, spec["pixel_padding"]), sigma, truncate)
+        cuts = slit_cuts(spec)
+        return FullInference(lambda history: solve_pixel_equation(history, Gc, lc, h_px, spec["pixel_padding"], cuts=cuts), sigma, truncate)
     raise ValueError(f"ifenn predictor '{spec['predictor']}' is unknown; allowed: {PREDICTORS}")
 
 

@@ -84,7 +84,7 @@ import scipy.ndimage
 
 from ifenn.config import schema_defaults
 from ifenn.network.picnn import LAPLACIAN_K9_STAR
-from ifenn.pixels import Box, box_area, grow_box
+from ifenn.pixels import Box, SlitCuts, box_area, grow_box
 
 log = logging.getLogger(__name__)
 
@@ -107,20 +107,23 @@ def _stencil_sum(padded: np.ndarray) -> np.ndarray:
     return LAPLACIAN_K9_STAR[0, 1] * edge + LAPLACIAN_K9_STAR[0, 0] * corner
 
 
-def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate") -> np.ndarray:
+def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate", cuts: SlitCuts | None = None) -> np.ndarray:
     """r = R / (Gc/lc + 2H) on the whole image: an upper bound, in the max norm, of
-    |phi - exact| (module doc). R is the residual of :func:`ifenn.network.picnn.residual`."""
+    |phi - exact| (module doc). R is the residual of :func:`ifenn.network.picnn.residual`,
+    with the stencil links that ``cuts`` (the scene's slits) cut left out."""
     phi, history = np.asarray(phi, dtype=np.float64), np.asarray(history, dtype=np.float64)
-    return PixelEquation(Gc, lc, h_px, padding).residual_on(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])))
+    return PixelEquation(Gc, lc, h_px, padding, cuts).residual_on(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])))
 
 
 class PixelEquation:
-    """The pixel equation of one image: residuals and local solves on boxes."""
+    """The pixel equation of one image: residuals and local solves on boxes. ``cuts``: the
+    stencil links the scene's slits cut (:class:`ifenn.pixels.SlitCuts`; None: no slit)."""
 
-    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate"):
+    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None):
         if padding not in ("replicate", "zeros"):
             raise ValueError(f"pixel equation padding must be 'replicate' or 'zeros', got {padding!r}")
         self.Gc, self.lc, self.h_px, self.padding = Gc, lc, h_px, padding
+        self.cuts = cuts if cuts else None
         self.diffusion = Gc * lc / h_px**2
         self.reaction0 = Gc / lc
 
@@ -144,7 +147,14 @@ class PixelEquation:
 
     def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool = True) -> np.ndarray:
         """Residual on ``box`` (its own shape): r = R / (Gc/lc + 2H), or R itself; in one pass of
-        the compiled kernel where it builds (read from the image: no padded copy), else in numpy."""
+        the compiled kernel where it builds (read from the image: no padded copy), else in numpy;
+        the slits' cut links are then taken out (R += D x their flux)."""
+        if self.cuts is None:
+            return self._residual_uncut(phi, history, box, normalised)
+        residual = self._residual_uncut(phi, history, box, False) + self.diffusion * self.cuts.flux_on(phi, box)
+        return residual / (self.reaction0 + 2.0 * history[box]) if normalised else residual
+
+    def _residual_uncut(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool) -> np.ndarray:
         lib = _kernel()
         if lib is not None:
             phi, history = np.ascontiguousarray(phi, dtype=np.float64), np.ascontiguousarray(history, dtype=np.float64)
@@ -158,9 +168,17 @@ class PixelEquation:
         residual = self._operator(self._extended(phi, box), h, True)
         return residual / (self.reaction0 + 2.0 * h) if normalised else residual
 
-    def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
+    def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool], links=None) -> np.ndarray:
         """A x on a box (``history``: H there) for x with zero Dirichlet data around it (the
-        padding on image edges)."""
+        padding on image edges); ``links``: the slits' cut links in the box (SlitCuts.in_box)."""
+        out = self._apply_uncut(x, history, edges)
+        if links is not None and links[0].size:
+            rows, cols, weights = links
+            flat = x.reshape(-1)
+            np.add.at(out.reshape(-1), rows, self.diffusion * weights * (np.where(cols >= 0, flat[np.maximum(cols, 0)], 0.0) - flat[rows]))
+        return out
+
+    def _apply_uncut(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
         ext = np.zeros((x.shape[0] + 2, x.shape[1] + 2))
         ext[1:-1, 1:-1] = x
         if self.padding == "replicate":
@@ -201,6 +219,7 @@ class PixelEquation:
         edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
         h = np.ascontiguousarray(history[box])
         reaction = self.reaction0 + 2.0 * h
+        links = self.cuts.in_box(box) if self.cuts is not None else None
         lib = _kernel()
         if lib is not None:  # multigrid-preconditioned CG, compiled
             # the correction delta solves A delta = -R(phi), zero around the box
@@ -209,9 +228,11 @@ class PixelEquation:
             delta = np.empty(centre.shape)
             replicate = np.array(edges if self.padding == "replicate" else (False,) * 4, dtype=np.intc)
             worst = np.zeros(1)
+            rows, cols, weights = (np.ascontiguousarray(links[0], dtype=np.intc), np.ascontiguousarray(links[1], dtype=np.intc),
+                                   np.ascontiguousarray(links[2], dtype=np.float64)) if links is not None else (np.zeros(0, np.intc),) * 2 + (np.zeros(0),)
             iterations = lib.ifenn_pixel_mg_pcg(residual.ctypes.data, np.ascontiguousarray(reaction).ctypes.data, delta.ctypes.data,
                                                 delta.shape[0], delta.shape[1], self.diffusion, replicate.ctypes.data, target, maxiter,
-                                                worst.ctypes.data)
+                                                worst.ctypes.data, rows.size, rows.ctypes.data, cols.ctypes.data, weights.ctypes.data)
             if iterations < 0:
                 raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                    f"(reached {worst[0]:g})")
@@ -219,7 +240,7 @@ class PixelEquation:
             return float(worst[0]), int(iterations)
         ext = self._extended(phi, box)
         centre = ext[1:-1, 1:-1]
-        residual = -self._operator(ext, h, True)
+        residual = -self.residual_on(phi, history, box, normalised=False)
         worst = float(np.max(np.abs(residual) / reaction))
         iterations = 0
         delta = np.zeros_like(centre)
@@ -233,7 +254,7 @@ class PixelEquation:
                     raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                        f"(reached {worst:g})")
                 iterations += 1
-                a_dir = self._apply(direction, h, edges)
+                a_dir = self._apply(direction, h, edges, links)
                 alpha = rz / float(np.vdot(direction, a_dir))
                 delta += alpha * direction
                 residual -= alpha * a_dir

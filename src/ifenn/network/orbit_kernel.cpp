@@ -532,8 +532,14 @@ void ifenn_pixel_residual(const double* phi, const double* history, double* out,
     }
 }
 
+// Slits (ifenn.pixels.SlitCuts): n_cut directed links i -> j of the box (flat indices; j = -1:
+// beyond the box, where delta is 0) that carry no flux: (A x)_i += D w (x_j - x_i) for each. The
+// CG's operator and so its residual and certificate are the cut ones; the V-cycle keeps the uncut
+// stencil (a symmetric positive definite preconditioner still: CG converges, a little slower
+// where a slit crosses the box).
 int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n, int m, double D, const int* replicate,
-                       double target, int maxiter, double* worst) {
+                       double target, int maxiter, double* worst, int n_cut, const int* cut_rows, const int* cut_cols,
+                       const double* cut_w) {
     MGWork& work = mg_work(n, m, replicate);
     mg_coefficients(work, a, D);
     std::vector<MGLevel>& levels = work.levels;
@@ -586,6 +592,14 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
                 sums[j & 3] += mid[j + 1] * o[j];
             }
         }
+        for (int k = 0; k < n_cut; ++k) {
+            const int i = cut_rows[k], j = cut_cols[k];
+            const double pi = p[(i / m + 1) * w + i % m + 1];
+            const double pj = j >= 0 ? p[(j / m + 1) * w + j % m + 1] : 0.0;
+            const double change = D * cut_w[k] * (pj - pi);
+            q[i] += change;
+            sums[0] += pi * change;
+        }
         const double alpha = rz / ((sums[0] + sums[1]) + (sums[2] + sums[3]));
         // delta += alpha p, r -= alpha q, and the certificate's max |r| / a
         double largest[4] = {0.0, 0.0, 0.0, 0.0};
@@ -621,6 +635,6 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     return -1;
 }
 
-int ifenn_kernel_version() { return 5; }
+int ifenn_kernel_version() { return 6; }
 
 }

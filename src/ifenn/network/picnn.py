@@ -273,16 +273,24 @@ class PICNN(nn.Module):
 # ---------------------------------------------------------------------------------------
 # Pixel physics
 # ---------------------------------------------------------------------------------------
-def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros") -> torch.Tensor:
+def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros", cuts=None) -> torch.Tensor:
     """Isotropic 9-point Laplacian (K9*(phi) - 3 phi) / h_px^2.
 
     phi : (n, 1, ny, nx) tensor; h_px : pixel spacing in mm; padding : "zeros" (phi = 0
-    beyond the image, the released script) or "replicate" (zero flux).
+    beyond the image, the released script) or "replicate" (zero flux); cuts : the stencil links
+    the scene's slits cut (:class:`ifenn.pixels.SlitCuts` of this image's shape), left out.
     Returns (n, 1, ny, nx), units 1/mm^2.
     """
     stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype).reshape(1, 1, 3, 3)
-    neighbours = F.conv2d(_pad(phi, 1, padding), stencil)
-    return (neighbours + LAPLACIAN_CENTRE_WEIGHT * phi) / h_px**2
+    neighbours = F.conv2d(_pad(phi, 1, padding), stencil) + LAPLACIAN_CENTRE_WEIGHT * phi
+    if cuts:
+        if tuple(phi.shape[-2:]) != tuple(cuts.shape):
+            raise ValueError(f"slit cuts of a {cuts.shape} image on a {tuple(phi.shape[-2:])} one")
+        flat = phi.reshape(*phi.shape[:-2], -1)
+        rows, cols = torch.as_tensor(cuts.rows), torch.as_tensor(cuts.cols)
+        flux = torch.zeros_like(flat).index_add_(-1, rows, torch.as_tensor(cuts.weights, dtype=phi.dtype) * (flat[..., cols] - flat[..., rows]))
+        neighbours = neighbours - flux.reshape(phi.shape)
+    return neighbours / h_px**2
 
 
 def residual(
@@ -292,12 +300,14 @@ def residual(
     lc: float,
     h_px: float,
     padding: str = "zeros",
+    cuts=None,
 ) -> torch.Tensor:
     """Pixel residual R = (Gc/lc) phi - Gc lc Lap(phi) - 2 (1 - phi) H, N/mm^2.
 
-    phi, history : (n, 1, ny, nx) tensors (history in N/mm^2, already capped if wanted).
+    phi, history : (n, 1, ny, nx) tensors (history in N/mm^2, already capped if wanted);
+    cuts : the slits' cut stencil links (:func:`laplacian_9pt`).
     """
-    return (Gc / lc) * phi - Gc * lc * laplacian_9pt(phi, h_px, padding) - 2.0 * (1.0 - phi) * history
+    return (Gc / lc) * phi - Gc * lc * laplacian_9pt(phi, h_px, padding, cuts) - 2.0 * (1.0 - phi) * history
 
 
 def physics_loss(
@@ -384,6 +394,7 @@ def solve_pixel_equation(
     rtol: float = 1e-10,
     maxiter: int = 1000,
     initial_guess: np.ndarray | None = None,
+    cuts=None,
 ) -> np.ndarray:
     """Exact phi of the pixel equation R(phi) = 0 for a history map (no network).
 
@@ -397,19 +408,25 @@ def solve_pixel_equation(
     history : (ny, nx) or (n, ny, nx) array, N/mm^2 (pass it capped if the network is).
     initial_guess : optional phi of the same shape (e.g. the previous increment's);
         default: the local solution 2H / (Gc/lc + 2H).
+    cuts : the stencil links the scene's slits cut (:class:`ifenn.pixels.SlitCuts`), left out
+        of L (no flux across a slit, as FEM's doubled nodes); the preconditioner stays the
+        uncut operator's (CG then needs a few more iterations).
     Returns phi with the shape of ``history`` (float64).
     """
     history = np.asarray(history, dtype=np.float64)
     if history.ndim == 3:
         guesses = [None] * len(history) if initial_guess is None else list(initial_guess)
         return np.stack(
-            [solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter, g) for h, g in zip(history, guesses, strict=True)]
+            [solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter, g, cuts) for h, g in zip(history, guesses, strict=True)]
         )
     ny, nx = history.shape
     h_flat = history.reshape(-1)
     diffusion = Gc * lc / h_px**2
     reaction = Gc / lc + 2.0 * h_flat
-    system = (scipy.sparse.diags(reaction) - diffusion * laplacian_matrix(ny, nx, padding)).tocsr()
+    laplacian = laplacian_matrix(ny, nx, padding)
+    if cuts:
+        laplacian = laplacian - cuts.matrix()
+    system = (scipy.sparse.diags(reaction) - diffusion * laplacian).tocsr()
     rhs = 2.0 * h_flat
     symbol = reaction.min() - diffusion * _laplacian_symbol(ny, nx, padding)
     forward, inverse = _fast_transforms(padding)

@@ -171,10 +171,13 @@ class Replay:
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
         """Exact pixel phase field for a history image (pass it capped or not)."""
+        from ifenn.hybrid.runs import slit_cuts
         from ifenn.network.picnn import solve_pixel_equation
 
+        if not hasattr(self, "_cuts"):
+            self._cuts = slit_cuts(self.spec)
         return solve_pixel_equation(history, self.material["Gc"], self.material["lc"], self.h_px, self.spec["pixel_padding"],
-                                    maxiter=5000)
+                                    maxiter=5000, cuts=self._cuts)
 
     def capped(self, history: np.ndarray) -> np.ndarray:
         return np.clip(history, 0.0, self.spec["history_cap"])

@@ -112,7 +112,7 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     its largest normalised residual max |r| (the check's quantity; >= the largest error) and the
     share of pixels with |r| above the verification tolerance. With ``ifenn_history`` (the
     whole-path run's), its verified step's record at that increment is added."""
-    from ifenn.hybrid.runs import _network_inference
+    from ifenn.hybrid.runs import _network_inference, slit_cuts
     from ifenn.hybrid.verification import PixelEquation
     from ifenn.network.picnn import solve_pixel_equation
 
@@ -125,12 +125,13 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     later = [k for k in saved if switch > 0 and k >= switch][:after]
     states = {s["increment"]: (s["u"], s["history"], s["phase_field_gp"])
               for s in run_files.read_states(fem_fields, before + later, keys=run_files.MAP_KEYS)}
-    equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"])
+    cuts = slit_cuts(spec)
+    equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], cuts)
     network = _network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape)
     rows = []
     for k, (u, history, phi_fem) in states.items():
         capped = np.clip(history, 0.0, spec["history_cap"])
-        exact = solve_pixel_equation(capped, Gc, lc, h_px, spec["pixel_padding"], rtol=1e-12)
+        exact = solve_pixel_equation(capped, Gc, lc, h_px, spec["pixel_padding"], rtol=1e-12, cuts=cuts)
         predicted = np.asarray(network(capped), dtype=np.float64)
         error = np.abs(predicted - exact)
         r = np.abs(equation.residual_on(predicted, capped, (slice(0, capped.shape[0]), slice(0, capped.shape[1]))))
