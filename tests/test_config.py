@@ -90,7 +90,7 @@ def test_defaults_are_filled(paper_config):
         (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_increment=100), ["ifenn_runs.snt1-I.switch_increment", "only with switch_over 'increment'"]),
         (lambda c: c["ifenn"].update(switch_increment=100), ["ifenn.switch_increment", "only with switch_over 'increment'"]),
         (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_over="increment", switch_increment=0), ["switch_increment", "minimum of 1"]),
-        (lambda c: c["whole_path"]["runs"].append("snt1-I"), ["whole_path.runs[7]", "'snt1-I'", "needs switch_over 'start'"]),
+        (lambda c: c["whole_path"]["runs"].append("snt1-I"), ["whole_path.runs[8]", "'snt1-I'", "needs switch_over 'start'"]),
         (lambda c: c["whole_run_benchmark"]["runs"].append("snt9-whole"), ["whole_run_benchmark.runs[3]", "'snt9-whole'", "allowed"]),
         (lambda c: c["whole_path"].update(network_runs=["snt1-I-verified"]), ["whole_path.network_runs[0]", "not in whole_path.runs"]),
     ],

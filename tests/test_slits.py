@@ -173,3 +173,35 @@ def test_training_residual_knows_the_slits():
     assert float(exact_r.abs().max()) < 1e-8 * float(2 * history.max())
     with pytest.raises(ValueError, match="slit cuts of a"):
         residual(as_tensor(phi[:-2]), as_tensor(history[:-2]), GC, LC, grid.h_px, "replicate", cuts)
+
+
+def test_training_loss_on_crops_knows_the_slits():
+    """The training loss on crops (each with its own share of the slit's cuts) adds up to the
+    full image's loss with the cuts, as the uncut one does without; and training with the cuts
+    is deterministic for a seed."""
+    import torch
+
+    from ifenn.network.picnn import PICNN, physics_loss
+    from ifenn.network.training import make_tiles, train_picnn
+
+    grid, cuts = _setup()
+    torch.manual_seed(4)
+    model = PICNN(padding="replicate").double()
+    capped = np.minimum(_history(grid), model.history_cap)[None]
+    tiles, _ = make_tiles(capped, tile_size=20, context=9, process_zone_history=GC / LC, process_zone_margin_px=4)
+    crop = tuple(tiles.history.shape[-2:])
+    stacked = SlitCuts.stacked([cuts.crop((slice(cy, cy + crop[0]), slice(cx, cx + crop[1]))) for _, cy, cx in tiles.origins])
+    image = torch.as_tensor(capped[0])[None, None]
+    full = physics_loss(model.phase_field(image), image, GC, LC, grid.h_px, "replicate", cuts=cuts)
+    tiled = physics_loss(model.phase_field(tiles.history), tiles.history, GC, LC, grid.h_px, "replicate", tiles.weight, stacked)
+    torch.testing.assert_close(tiled, full, rtol=1e-10, atol=0.0)
+    from ifenn.network.picnn import residual
+
+    with torch.no_grad():  # the cuts change the residual on the slit's two rows of pixels only
+        phi = model.phase_field(image)
+        change = (residual(phi, image, GC, LC, grid.h_px, "replicate", cuts) - residual(phi, image, GC, LC, grid.h_px, "replicate"))
+    rows, cols = np.nonzero(change[0, 0].numpy())
+    assert set(rows) == {19, 20} and cols.max() <= 12
+    settings = {"epochs": 4, "full_image_epochs": 2, "lr": 1e-2, "channels": (1, 4, 4, 1), "tile_size": 20}
+    runs = [train_picnn([capped[0]], grid.h_px, GC, LC, settings, seed=1, progress=False, cuts=cuts)[1].loss for _ in range(2)]
+    np.testing.assert_array_equal(runs[0], runs[1])

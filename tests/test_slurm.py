@@ -99,9 +99,16 @@ def test_quick_slice_through_slurm_equals_local_run(local_cluster, tmp_path):
     assert set(recorded) == set(submitted) and all(state == "COMPLETED" for state, _ in recorded.values()), jobs
     assert {submitted[job]: cpus for job, (_, cpus) in recorded.items()}["fem"] == 2, jobs
 
-    # same code, same ranks and threads: the numbers agree to round-off (here they are identical)
-    for csv in ("fem/snt1-I/history.csv", "picnn/loss.csv", "picnn/scores.csv", "ifenn/snt1-I/history.csv"):
-        pd.testing.assert_frame_equal(_values(slurm / "results" / csv), _values(local / "results" / csv),
-                                      check_exact=False, rtol=1e-9, atol=1e-12, obj=csv)
+    # same code, same ranks and threads: the numbers agree to the FEM's solver tolerance. Under
+    # SLURM's launcher the two ranks' sums may reduce in another order, and CG (rtol 1e-8) then
+    # stops on other round-offs: measured 2.3e-6 of the largest force, 1.7e-5 of the training loss
+    # (2026-12-04); the same tolerance the direct and iterative solvers agree to (test_solver)
+    for csv, tolerance in (("fem/snt1-I/history.csv", 1e-5), ("picnn/loss.csv", 1e-4), ("picnn/scores.csv", 1e-5),
+                           ("ifenn/snt1-I/history.csv", 1e-5)):
+        there, here = _values(slurm / "results" / csv), _values(local / "results" / csv)
+        assert list(there.columns) == list(here.columns) and len(there) == len(here), csv
+        for column in here.select_dtypes("number"):
+            scale = max(float(here[column].abs().max()), 1e-300)
+            assert float((there[column] - here[column]).abs().max()) <= tolerance * scale, (csv, column)
     for provenance in (slurm, local):
         assert '"mpi_ranks": 2' in (provenance / "results/fem/snt1-I/provenance.json").read_text()

@@ -174,7 +174,8 @@ def test_quick_profile_whole_path(quick_workflow):
     row per run and method; the speed-accuracy table has the whole-path points."""
     results = quick_workflow / "results"
     table = pd.read_csv(results / "tables" / "whole_path.csv").set_index("run")
-    assert set(table.index) == {f"{run}-whole" for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt")}
+    assert set(table.index) == {f"{run}-whole" for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt",
+                                                           "snt-shear")}
     assert (table.hybrid_increments == table.increments_fem).all() and (table.peak_force_rel_error.abs() < 0.0015).all()
     assert (table.drop(index="adnt-whole").peak_force_rel_error.abs() < 0.001).all()
     assert table.meets_all.all()
@@ -196,7 +197,7 @@ def test_quick_profile_reference_convergence(quick_workflow):
     phase field at h/2. A verified run that switches late follows FEM at h after the switch (adnt:
     0.03 % apart) and is then as far from the finer FEM as FEM is, never farther. Paper scale: README."""
     table = pd.read_csv(results := quick_workflow / "results" / "tables" / "reference_convergence.csv", keep_default_na=False)
-    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt"}
+    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear"}
     fem = table[table.method == "fem"].set_index("case")
     assert (fem.rms_vs_fine > 0.003).all() and (fem.peak_force_fine < fem.peak_force).all()  # a coarser AT2 mesh is tougher
     runs = table[table.method == "ifenn"]

@@ -120,9 +120,12 @@ def _non_finite(instance: Any, path: tuple = ()) -> list[str]:
     return []
 
 
-def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
+def validate_config(config: dict, schema_path: Path = SCHEMA_PATH, petsc_names: bool = True) -> dict:
     """Validate against the JSON schema, fill defaults, then check cross-references and
-    geometry. Returns a new, completed config; raises ConfigError listing every problem."""
+    geometry. Returns a new, completed config; raises ConfigError listing every problem.
+
+    ``petsc_names``: check PETSc type names against PETSc's own (read in a child process, ~1 s:
+    :func:`_petsc_type_names`); the jobs' Snakemake processes skip it, the main one checked."""
     schema = _schema(Path(schema_path))
     validator = jsonschema.Draft202012Validator(schema)
     problems = _non_finite(config) + [
@@ -133,7 +136,7 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     config = copy.deepcopy(config)
     _fill_defaults(config, schema, schema)
-    problems = _semantic_problems(config)
+    problems = _semantic_problems(config, petsc_names)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     return config
@@ -143,23 +146,42 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH) -> dict:
 _PETSC_TYPE_OPTIONS = {"ksp_type": "KSP", "pc_type": "PC", "pc_factor_mat_solver_type": "SOLVER", "pc_factor_mat_ordering_type": "ORDERING"}
 
 
+_PETSC_NAMES_SCRIPT = """
+import json
+from petsc4py import PETSc
+enums = {"KSP": PETSc.KSP.Type, "PC": PETSc.PC.Type, "SOLVER": PETSc.Mat.SolverType, "ORDERING": PETSc.Mat.OrderingType}
+print(json.dumps({kind: sorted({getattr(e, n) for n in dir(e) if not n.startswith("_") and isinstance(getattr(e, n), str)})
+                  for kind, e in enums.items()}))
+"""
+
+
+@functools.cache
+def _petsc_type_names() -> dict | None:
+    """PETSc's type names by kind (KSP, PC, SOLVER, ORDERING), read in a child process: importing
+    petsc4py starts MPI, and a Snakemake process with MPI started passes MPI's environment to
+    the jobs it submits (sbatch --export=ALL), where mpirun then exits 1 without a word (seen
+    under SLURM). None where petsc4py is missing (PETSc checks the names when a run starts)."""
+    import importlib.util
+    import subprocess
+    import sys
+
+    if importlib.util.find_spec("petsc4py") is None:
+        return None
+    done = subprocess.run([sys.executable, "-c", _PETSC_NAMES_SCRIPT], capture_output=True, text=True)
+    return json.loads(done.stdout) if done.returncode == 0 else None
+
+
 def _petsc_problems(key: str, options: dict) -> list[str]:
     """Values of PETSc options that PETSc would refuse only inside a run: an unknown type name
     (``ksp_type``, ``pc_type``, the factor's solver and ordering, also behind a ``sub_`` or
     ``mg_levels_`` prefix) and a tolerance or iteration limit that is not a positive number."""
-    try:
-        from petsc4py import PETSc
-    except ImportError:  # checked again by PETSc itself when the run starts
-        return []
-    enums = {"KSP": PETSc.KSP.Type, "PC": PETSc.PC.Type, "SOLVER": PETSc.Mat.SolverType, "ORDERING": PETSc.Mat.OrderingType}
+    names = _petsc_type_names() or {}
     problems = []
     for option, value in options.items():
         base = option.removeprefix("sub_").removeprefix("mg_levels_").removeprefix("mg_coarse_")
         if base in _PETSC_TYPE_OPTIONS:
-            enum = enums[_PETSC_TYPE_OPTIONS[base]]
-            allowed = sorted({getattr(enum, name) for name in dir(enum) if not name.startswith("_")
-                              and isinstance(getattr(enum, name), str)})
-            if str(value) not in allowed:
+            allowed = names.get(_PETSC_TYPE_OPTIONS[base])
+            if allowed is not None and str(value) not in allowed:
                 problems.append(f"config key '{key}.{option}': {value!r} is not a PETSc type of that kind; allowed: {allowed}")
         elif base.endswith(("_rtol", "_atol", "_max_it")):
             integral = base.endswith("_max_it")
@@ -169,7 +191,7 @@ def _petsc_problems(key: str, options: dict) -> list[str]:
     return problems
 
 
-def _semantic_problems(config: dict) -> list[str]:
+def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
     problems: list[str] = []
     presets = config["solver"]["linear_solver_presets"]
     if config["solver"]["linear_solvers"] not in presets:
@@ -183,7 +205,8 @@ def _semantic_problems(config: dict) -> list[str]:
                             "needs a Krylov solve (ksp_type cg, ...), got ksp_type 'preonly'")
     for name, preset in presets.items():
         for field in ("displacement", "phase_field"):
-            problems += _petsc_problems(f"solver.linear_solver_presets.{name}.{field}", preset[field])
+            if petsc_names:
+                problems += _petsc_problems(f"solver.linear_solver_presets.{name}.{field}", preset[field])
     for name, scene in config["scenes"].items():
         key = f"scenes.{name}"
         (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
@@ -426,8 +449,10 @@ def load_values(schedule: list[dict]) -> list[float]:
 
 
 def training_spec(config: dict) -> dict:
-    """What the training rules need: the PICNN section, material and the training run."""
-    return {**config["picnn"], "material": config["material"]}
+    """What the training rules need: the PICNN section, material and the training run's scene
+    (its slits cut the loss's stencil, as in every pixel operator)."""
+    scene = config["scenes"][config["fem_runs"][config["picnn"]["training_run"]]["scene"]]
+    return {**config["picnn"], "material": config["material"], "scene": scene}
 
 
 def fem_run_spec(config: dict, run: str) -> dict:

@@ -190,6 +190,23 @@ class SlitCuts:
         links = scipy.sparse.csc_matrix((self.weights, (self.rows, self.cols)), shape=(n, n))
         return (links - scipy.sparse.diags(np.asarray(links.sum(axis=1)).ravel())).tocsc()
 
+    def crop(self, box: Box) -> SlitCuts:
+        """The cuts of the image cropped to ``box``: the links with both ends inside it, in the
+        crop's indices (a crop whose Laplacian pads at the image's own edge folds as the image)."""
+        rows, cols, weights = self.in_box(box)
+        inside = cols >= 0
+        shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+        return SlitCuts(shape, rows[inside].astype(np.int64), cols[inside].astype(np.int64), weights[inside])
+
+    @staticmethod
+    def stacked(cuts: list[SlitCuts]) -> SlitCuts:
+        """The cuts of a batch of images of one shape (n, ny, nx), indices into the flattened
+        batch: image k's pixel i is k * ny * nx + i (torch's Laplacian of a batch of crops)."""
+        shape = cuts[0].shape
+        size = shape[0] * shape[1]
+        return SlitCuts((len(cuts), *shape), np.concatenate([c.rows + k * size for k, c in enumerate(cuts)]),
+                        np.concatenate([c.cols + k * size for k, c in enumerate(cuts)]), np.concatenate([c.weights for c in cuts]))
+
     def in_box(self, box: Box) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The cut links starting inside ``box``, in the box's flat indices: (rows, cols,
         weights), cols -1 where the link's other end lies outside the box."""

@@ -9,7 +9,9 @@ from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 
 try:
-    _validated = validate_config(config)
+    # PETSc's type names once, in the main process (a child process reads them: petsc4py would
+    # start MPI here, and its environment would reach the jobs; ifenn.config._petsc_type_names)
+    _validated = validate_config(config, petsc_names=workflow.is_main_process)
 except ConfigError as error:
     raise WorkflowError(str(error)) from None
 config.clear()

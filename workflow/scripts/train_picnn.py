@@ -9,6 +9,7 @@ from ifenn.io import log_to, provenance, write_csv, write_json
 from ifenn.network.picnn import save_picnn
 from ifenn.network.training import resolve_settings, score_picnn, train_picnn
 from ifenn.network.training_data import read_training_data
+from ifenn.pixels import PixelGrid, SlitCuts
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])
@@ -17,8 +18,10 @@ data = read_training_data(snakemake.input.data)
 settings = resolve_settings({"preset": spec["preset"], **spec["settings"]})
 material = spec["material"]
 started = time.perf_counter()
+grid = PixelGrid(float(data["x0"]), float(data["y0"]), float(data["h_px"]), int(data["nx_px"]), int(data["ny_px"]))
+cuts = SlitCuts.for_scene(spec["scene"], grid, settings["laplacian_padding"])
 model, loss = train_picnn(list(data["history"]), float(data["h_px"]), material["Gc"], material["lc"], settings,
-                          seed=spec["seed"], threads=snakemake.threads, progress=True)
+                          seed=spec["seed"], threads=snakemake.threads, progress=True, cuts=cuts)
 wall = time.perf_counter() - started
 save_picnn(model, snakemake.output.model, float(data["h_px"]), material["Gc"], material["lc"], spec_hash(spec),
            extra={"settings": settings, "training_increments": data["increment"].tolist()})

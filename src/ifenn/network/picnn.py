@@ -284,9 +284,11 @@ def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros", cuts=N
     stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype).reshape(1, 1, 3, 3)
     neighbours = F.conv2d(_pad(phi, 1, padding), stencil) + LAPLACIAN_CENTRE_WEIGHT * phi
     if cuts:
-        if tuple(phi.shape[-2:]) != tuple(cuts.shape):
-            raise ValueError(f"slit cuts of a {cuts.shape} image on a {tuple(phi.shape[-2:])} one")
-        flat = phi.reshape(*phi.shape[:-2], -1)
+        # cuts of one image apply to every image of the batch; stacked cuts (n, ny, nx) to each its own
+        batch = len(cuts.shape) == 3
+        if tuple(phi.shape[-2:]) != tuple(cuts.shape[-2:]) or (batch and phi.shape[0] * phi.shape[1] != cuts.shape[0]):
+            raise ValueError(f"slit cuts of a {cuts.shape} image on a {tuple(phi.shape)} one")
+        flat = phi.reshape(-1) if batch else phi.reshape(*phi.shape[:-2], -1)
         rows, cols = torch.as_tensor(cuts.rows), torch.as_tensor(cuts.cols)
         flux = torch.zeros_like(flat).index_add_(-1, rows, torch.as_tensor(cuts.weights, dtype=phi.dtype) * (flat[..., cols] - flat[..., rows]))
         neighbours = neighbours - flux.reshape(phi.shape)
@@ -318,13 +320,15 @@ def physics_loss(
     h_px: float,
     padding: str = "zeros",
     pixel_weight: torch.Tensor | None = None,
+    cuts=None,
 ) -> torch.Tensor:
     """Loss L = ||R||_2 over all pixels of all images (the paper's eq. for L), N/mm^2.
 
     ``pixel_weight`` (same shape as phi, optional) multiplies R^2 pixel by pixel before the
-    sum; training on crops uses it to mask the crop margins and to weight samples.
+    sum; training on crops uses it to mask the crop margins and to weight samples. ``cuts``: the
+    slits' cut stencil links (:func:`laplacian_9pt`; stacked ones for a batch of crops).
     """
-    r = residual(phi, history, Gc, lc, h_px, padding)
+    r = residual(phi, history, Gc, lc, h_px, padding, cuts)
     squared = r**2 if pixel_weight is None else pixel_weight * r**2
     return torch.sqrt(squared.sum())
 

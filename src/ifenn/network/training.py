@@ -73,6 +73,7 @@ import torch
 
 from ifenn.io import progress_bar
 from ifenn.network.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
+from ifenn.pixels import SlitCuts
 
 DEFAULT_SETTINGS: dict = {
     "lr": 1e-3,
@@ -158,6 +159,8 @@ class TileBatch:
 
     history: torch.Tensor
     weight: torch.Tensor
+    #: (map, row, column) of each crop's first pixel in its map
+    origins: np.ndarray | None = None
 
 
 def _tile_windows(n: int, tile: int, crop: int) -> list[tuple[int, int, int]]:
@@ -193,11 +196,12 @@ def make_tiles(
     hot = history_maps >= process_zone_history
     if process_zone_margin_px > 0:
         hot = _dilate(hot, process_zone_margin_px)
-    crops, weights, in_zone = [], [], []
+    crops, weights, in_zone, origins = [], [], [], []
     for m in range(n_maps):
         for cy, ty0, ty1 in _tile_windows(ny, tile_size, crop_y):
             for cx, tx0, tx1 in _tile_windows(nx, tile_size, crop_x):
                 crops.append(history_maps[m, cy : cy + crop_y, cx : cx + crop_x])
+                origins.append((m, cy, cx))
                 weight = np.zeros((crop_y, crop_x))
                 weight[ty0 - cy : ty1 - cy, tx0 - cx : tx1 - cx] = 1.0
                 weights.append(weight)
@@ -205,6 +209,7 @@ def make_tiles(
     batch = TileBatch(
         history=torch.as_tensor(np.stack(crops)[:, None]),
         weight=torch.as_tensor(np.stack(weights)[:, None]),
+        origins=np.array(origins),
     )
     return batch, np.array(in_zone)
 
@@ -220,9 +225,9 @@ def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # Training
 # ---------------------------------------------------------------------------------------
-def _loss(model, history, weight, Gc, lc, h_px, laplacian_padding, residual_scaling, exponent) -> torch.Tensor:
+def _loss(model, history, weight, Gc, lc, h_px, laplacian_padding, residual_scaling, exponent, cuts=None) -> torch.Tensor:
     phi = model.phase_field(history)
-    r = residual(phi, history, Gc, lc, h_px, laplacian_padding)
+    r = residual(phi, history, Gc, lc, h_px, laplacian_padding, cuts)
     if residual_scaling == "reaction":
         r = r / (Gc / lc + 2.0 * history) ** exponent
     elif residual_scaling != "none":
@@ -250,6 +255,7 @@ def train_picnn(
     progress: bool = True,
     monitor=None,
     monitor_every: int = 100,
+    cuts=None,
 ) -> tuple[PICNN, pd.DataFrame]:
     """Train a PICNN on history pixel maps with the physics loss only.
 
@@ -257,6 +263,8 @@ def train_picnn(
     h_px : pixel spacing, mm; Gc : N/mm; lc : mm.
     settings : see the module docstring (``resolve_settings`` fills the defaults).
     seed, threads : same seed and threads -> identical weights.
+    cuts : the stencil links the maps' slits cut (:class:`ifenn.pixels.SlitCuts` of the maps'
+        shape): the loss is the pixel equation the verified step checks, on crops and full images.
     monitor : optional callable model -> dict of numbers, called every ``monitor_every``
         epochs and after the last; its values become extra columns of the log (NaN
         elsewhere). Its time is excluded from wall_s.
@@ -270,12 +278,12 @@ def train_picnn(
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True)
     try:
-        return _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every)
+        return _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts)
     finally:
         torch.use_deterministic_algorithms(was_deterministic)
 
 
-def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every):
+def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts=None):
     """train_picnn with resolved settings ``s``, inside the deterministic-algorithms guard."""
     rng = np.random.default_rng(seed)
     dtype = getattr(torch, s["dtype"])
@@ -308,6 +316,9 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
         zone_scale = zone_idx.size / n_zone_drawn if (n_zone_drawn and s["tile_weighting"] == "count") else 1.0
         far_scale = far_idx.size / n_far_drawn if (n_far_drawn and s["tile_weighting"] == "count") else 1.0
         tile_history, tile_weight = tiles.history.to(dtype), tiles.weight.to(dtype)
+        crop_shape = tuple(tiles.history.shape[-2:])
+        tile_cuts = [cuts.crop((slice(cy, cy + crop_shape[0]), slice(cx, cx + crop_shape[1]))) for _, cy, cx in tiles.origins] \
+            if cuts else None
     elif s["sampling"] != "full":
         raise ValueError(f"unknown sampling {s['sampling']!r}")
 
@@ -329,8 +340,10 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
             weight[:n_zone_drawn] *= zone_scale
             weight[n_zone_drawn:] *= far_scale
             history, stage = tile_history[index], "crops"
+            batch_cuts = SlitCuts.stacked([tile_cuts[i] for i in index.tolist()]) if tile_cuts else None
         else:
             history, weight, stage = full_history, None, "full"
+            batch_cuts = cuts
         optimiser.zero_grad(set_to_none=True)
         scaling = "none" if epoch < s["residual_scaling_warmup"] else s["residual_scaling"]
         if epoch == s["residual_scaling_warmup"] and epoch > 0:
@@ -338,7 +351,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
             # otherwise shrink the steps for ~1/(1 - beta2) epochs.
             optimiser = torch.optim.Adam(model.parameters(), lr=lr)
         loss = _loss(
-            model, history, weight, Gc, lc, h_px, s["laplacian_padding"], scaling, s["residual_scaling_exponent"]
+            model, history, weight, Gc, lc, h_px, s["laplacian_padding"], scaling, s["residual_scaling_exponent"], batch_cuts
         )
         loss.backward()
         optimiser.step()
