@@ -14,7 +14,9 @@ Normalisation and what the tolerance means. The check uses r_i = R_i / a_i, a ph
 (dimensionless). For any M-matrix of that kind, ||A^-1 R||_inf <= max_i |R_i| / a_i (take
 the pixel i where the error e = phi - phi* is largest: |R_i| = |a_i e_i + sum_j A_ij (e_i -
 e_j)... | >= a_i |e_i|, since the off-diagonal part only pulls e_i towards smaller
-neighbours). So
+neighbours). A slit (:class:`ifenn.pixels.SlitCuts`) removes the links that cross it: each cut
+takes the same weight off an off-diagonal entry and off the diagonal, so A stays such an M-matrix
+with the same row sums, and the bound holds unchanged on a cut grid. So
 
     max_i |r_i| <= tolerance   implies   max_i |phi_i - phi*_i| <= tolerance,
 
