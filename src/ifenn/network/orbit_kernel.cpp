@@ -257,7 +257,26 @@ struct MGLevel {
     std::vector<int> row_c, col_c;
     std::vector<real> row_w, col_w;
     std::vector<real> tmp;           // coarse rows x fine columns
+    // the finest level's slit cuts (links i -> j, flat in the level; j = -1 beyond the box): its
+    // smoother and residual use the cut operator; set for the duration of one call
+    int n_cut = 0;
+    const int* cut_rows = nullptr;
+    const int* cut_cols = nullptr;
+    const double* cut_w = nullptr;
 };
+
+// sum over the cut links of row i's D w x_j (x padded), the part of the cut operator the stencil
+// row does not have once the diagonal is the cut one: (A_cut x)_i = mg_row(diag_cut) + this
+template <class T>
+inline void mg_cut_add(const MGLevel& L, const T* x, T* out, T scale, bool padded_out) {
+    const int64_t w = L.m + 2;
+    for (int k = 0; k < L.n_cut; ++k) {
+        const int i = L.cut_rows[k], j = L.cut_cols[k];
+        const T xj = j >= 0 ? x[(j / L.m + 1) * w + j % L.m + 1] : T(0);
+        const int64_t o = padded_out ? (i / L.m + 1) * w + i % L.m + 1 : i;
+        out[o] += scale * T(L.D * L.cut_w[k]) * xj;
+    }
+}
 
 // the ghosts of a padded vector on L's box (single for the V-cycle, double for the CG)
 template <class T>
@@ -293,6 +312,7 @@ void mg_residual(const MGLevel& L, const real* x, const real* b, real* y) {
         real* o = y + static_cast<int64_t>(i) * m;
         for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
     }
+    mg_cut_add(L, x, y, real(-1), false);
 }
 
 // ``sweeps`` Jacobi sweeps x += D^-1 (b - A x), each one pass into the second buffer; from x = 0
@@ -320,6 +340,14 @@ void mg_jacobi(MGLevel& L, int sweeps, bool from_zero) {
             const real* bi = L.b.data() + static_cast<int64_t>(i) * m;
             real* yi = L.y.data() + (i + 1) * w + 1;
             for (int j = 0; j < m; ++j) yi[j] = up[w + j + 1] + vi[j] * (bi[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D));
+        }
+        if (L.n_cut) {  // y_i -= inv_i D w x_j for the cut links (x: before the sweep)
+            const int64_t w2 = m + 2;
+            for (int k = 0; k < L.n_cut; ++k) {
+                const int i = L.cut_rows[k], j = L.cut_cols[k];
+                const real xj = j >= 0 ? x[(j / m + 1) * w2 + j % m + 1] : real(0);
+                L.y[(i / m + 1) * w2 + i % m + 1] -= L.inv[i] * real(L.D * L.cut_w[k]) * xj;
+            }
         }
         std::swap(L.x, L.y);
         mg_ghosts(L, L.x.data());
@@ -484,6 +512,9 @@ void mg_coefficients(MGWork& work, const double* a, double D) {
     }
     for (MGLevel& L : levels)
         for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + real(3) * L.D, L.inv[c] = real(1) / L.diag[c];
+    MGLevel& top = levels[0];  // the cut links leave the finest level's diagonal
+    for (int k = 0; k < top.n_cut; ++k) top.diag[top.cut_rows[k]] -= real(top.D * top.cut_w[k]);
+    for (int k = 0; k < top.n_cut; ++k) top.inv[top.cut_rows[k]] = real(1) / top.diag[top.cut_rows[k]];
 }
 
 }  // namespace
@@ -534,16 +565,21 @@ void ifenn_pixel_residual(const double* phi, const double* history, double* out,
 
 // Slits (ifenn.pixels.SlitCuts): n_cut directed links i -> j of the box (flat indices; j = -1:
 // beyond the box, where delta is 0) that carry no flux: (A x)_i += D w (x_j - x_i) for each. The
-// CG's operator and so its residual and certificate are the cut ones; the V-cycle keeps the uncut
-// stencil (a symmetric positive definite preconditioner still: CG converges, a little slower
-// where a slit crosses the box).
+// CG's operator and so its residual and certificate are the cut ones; so are the finest level's
+// Jacobi smoother and residual in the V-cycle (diagonal and links), while the coarse levels stay
+// uncut (a symmetric positive definite preconditioner all the same).
 int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n, int m, double D, const int* replicate,
                        double target, int maxiter, double* worst, int n_cut, const int* cut_rows, const int* cut_cols,
                        const double* cut_w) {
     MGWork& work = mg_work(n, m, replicate);
-    mg_coefficients(work, a, D);
     std::vector<MGLevel>& levels = work.levels;
     MGLevel& top = levels[0];
+    top.n_cut = n_cut, top.cut_rows = cut_rows, top.cut_cols = cut_cols, top.cut_w = cut_w;
+    struct Unset {  // the work is cached per shape: forget this call's cuts on every return
+        MGLevel& L;
+        ~Unset() { L.n_cut = 0, L.cut_rows = L.cut_cols = nullptr, L.cut_w = nullptr; }
+    } unset{top};
+    mg_coefficients(work, a, D);
     const int64_t w = m + 2;
     double *r = work.r.data(), *z = work.z.data(), *q = work.q.data(), *p = work.p.data();
     const double* inv_a = work.inv_a.data();
@@ -635,6 +671,6 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     return -1;
 }
 
-int ifenn_kernel_version() { return 6; }
+int ifenn_kernel_version() { return 7; }
 
 }

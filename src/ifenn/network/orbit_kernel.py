@@ -26,7 +26,7 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("orbit_kernel.cpp")
 FLAGS = ("-O3", "-march=native", "-std=c++17", "-shared", "-fPIC")
-VERSION = 6
+VERSION = 7
 #: floats after the last pixel of every buffer handed to the kernel (a chunk reads past a run's end)
 SLACK = 64
 ACTIVATIONS = {"none": 0, "tanh": 1, "sigmoid": 2}
