@@ -40,7 +40,7 @@ def main(argv=None) -> int:
     if args.command == "stage-times":
         from ifenn.studies.stage_times import stage_times
 
-        print(stage_times(args.workdir).to_markdown(index=False) if _has_tabulate() else stage_times(args.workdir).to_string(index=False))
+        print(stage_times(args.workdir).to_markdown(index=False))
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):
@@ -67,12 +67,6 @@ def main(argv=None) -> int:
         status = run_cell(spec, args.out, args.fem_dir, args.model)
         logging.getLogger("ifenn").info("cell %s: %s", spec["name"], status)
     return 0
-
-
-def _has_tabulate() -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec("tabulate") is not None
 
 
 if __name__ == "__main__":

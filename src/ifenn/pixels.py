@@ -77,9 +77,13 @@ def box_area(box: Box) -> int:
 
 
 # --------------------------------------------------------------------------- slits
-#: the 9-point stencil K9*: weights of the links to the 8 neighbours (dy, dx); the Laplacian is
-#: (K9*(phi) - 3 phi) / h_px^2, i.e. sum over links of w (phi_j - phi_i) / h_px^2
-STENCIL_LINKS = ((-1, -1, 0.25), (-1, 0, 0.5), (-1, 1, 0.25), (0, -1, 0.5), (0, 1, 0.5), (1, -1, 0.25), (1, 0, 0.5), (1, 1, 0.25))
+#: Laplacian stencil K9* of the paper (section "PICNN training"); its weights sum to 3.
+LAPLACIAN_K9_STAR = np.array([[0.25, 0.5, 0.25], [0.5, 0.0, 0.5], [0.25, 0.5, 0.25]])
+#: Weight of the centre pixel in Lap(phi) * h_px^2 (= -sum of K9*).
+LAPLACIAN_CENTRE_WEIGHT = -3.0
+#: K9*'s links to the 8 neighbours, (dy, dx, weight): the Laplacian is
+#: sum over links of w (phi_j - phi_i) / h_px^2
+STENCIL_LINKS = tuple((dy, dx, float(LAPLACIAN_K9_STAR[dy + 1, dx + 1])) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0))
 
 
 @dataclass(frozen=True)

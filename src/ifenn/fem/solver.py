@@ -111,7 +111,7 @@ class StaggeredRun:
         self.loads: LoadControl = load_control(spec)
         adaptive_columns = ["rejected_steps", "rejected_iterations"] if self.loads.adaptive else []
         self.columns = HISTORY_COLUMNS + adaptive_columns + list(phase_field_step.extra_columns) + list(self.row_constants)
-        self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / ".work"
+        self.out_dir, self.work_dir = Path(out_dir), Path(out_dir) / run_files.WORK
         self.comm = problem.comm
         self.rank0 = self.comm.rank == 0
         self.hash = spec_hash(spec)
@@ -321,7 +321,7 @@ class StaggeredRun:
         from dolfinx import io
 
         snapshots = self.comm.bcast([str(s) for s in self._snapshots()] if self.rank0 else None, root=0)
-        tmp_dir = self.out_dir / ".work" / "paraview"
+        tmp_dir = self.work_dir / "paraview"
         if self.rank0:
             tmp_dir.mkdir(parents=True, exist_ok=True)
         self.comm.barrier()

@@ -85,8 +85,7 @@ import scipy.fft
 import scipy.ndimage
 
 from ifenn.config import schema_defaults
-from ifenn.network.picnn import LAPLACIAN_K9_STAR
-from ifenn.pixels import Box, SlitCuts, box_area, grow_box
+from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
 
 log = logging.getLogger(__name__)
 

@@ -265,16 +265,15 @@ struct MGLevel {
     const double* cut_w = nullptr;
 };
 
-// sum over the cut links of row i's D w x_j (x padded), the part of the cut operator the stencil
-// row does not have once the diagonal is the cut one: (A_cut x)_i = mg_row(diag_cut) + this
-template <class T>
-inline void mg_cut_add(const MGLevel& L, const T* x, T* out, T scale, bool padded_out) {
+// out_i -= scale_i D w x_j over the cut links i -> j (x padded, out n x m or padded by one):
+// once the diagonal is the cut one, (A_cut x)_i = mg_row(diag_cut) + D sum w x_j
+inline void mg_cut_subtract(const MGLevel& L, const real* x, real* out, const real* scale, bool padded_out) {
     const int64_t w = L.m + 2;
     for (int k = 0; k < L.n_cut; ++k) {
         const int i = L.cut_rows[k], j = L.cut_cols[k];
-        const T xj = j >= 0 ? x[(j / L.m + 1) * w + j % L.m + 1] : T(0);
+        const real xj = j >= 0 ? x[(j / L.m + 1) * w + j % L.m + 1] : real(0);
         const int64_t o = padded_out ? (i / L.m + 1) * w + i % L.m + 1 : i;
-        out[o] += scale * T(L.D * L.cut_w[k]) * xj;
+        out[o] -= (scale ? scale[i] : real(1)) * real(L.D * L.cut_w[k]) * xj;
     }
 }
 
@@ -312,7 +311,7 @@ void mg_residual(const MGLevel& L, const real* x, const real* b, real* y) {
         real* o = y + static_cast<int64_t>(i) * m;
         for (int j = 0; j < m; ++j) o[j] = bb[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D);
     }
-    mg_cut_add(L, x, y, real(-1), false);
+    mg_cut_subtract(L, x, y, nullptr, false);
 }
 
 // ``sweeps`` Jacobi sweeps x += D^-1 (b - A x), each one pass into the second buffer; from x = 0
@@ -341,14 +340,7 @@ void mg_jacobi(MGLevel& L, int sweeps, bool from_zero) {
             real* yi = L.y.data() + (i + 1) * w + 1;
             for (int j = 0; j < m; ++j) yi[j] = up[w + j + 1] + vi[j] * (bi[j] - mg_row(up, up + w, up + 2 * w, j, d[j], L.D));
         }
-        if (L.n_cut) {  // y_i -= inv_i D w x_j for the cut links (x: before the sweep)
-            const int64_t w2 = m + 2;
-            for (int k = 0; k < L.n_cut; ++k) {
-                const int i = L.cut_rows[k], j = L.cut_cols[k];
-                const real xj = j >= 0 ? x[(j / m + 1) * w2 + j % m + 1] : real(0);
-                L.y[(i / m + 1) * w2 + i % m + 1] -= L.inv[i] * real(L.D * L.cut_w[k]) * xj;
-            }
-        }
+        mg_cut_subtract(L, L.x.data(), L.y.data(), L.inv.data(), true);  // x: before the sweep
         std::swap(L.x, L.y);
         mg_ghosts(L, L.x.data());
     }

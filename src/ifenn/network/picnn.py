@@ -35,11 +35,7 @@ from torch import nn
 
 from ifenn.config import schema_default
 from ifenn.io import atomic_path, reading
-
-#: Laplacian stencil K9* of the paper (section "PICNN training"); its weights sum to 3.
-LAPLACIAN_K9_STAR = np.array([[0.25, 0.5, 0.25], [0.5, 0.0, 0.5], [0.25, 0.5, 0.25]])
-#: Weight of the centre pixel in Lap(phi) * h_px^2 (= -sum of K9*).
-LAPLACIAN_CENTRE_WEIGHT = -3.0
+from ifenn.pixels import LAPLACIAN_CENTRE_WEIGHT, LAPLACIAN_K9_STAR
 
 #: Padding modes understood by the network and the Laplacian. "zeros": values beyond the
 #: image are 0; "replicate": the edge value is repeated (zero flux for the Laplacian).

@@ -149,9 +149,10 @@ class Replay:
         from ifenn.fem.phase_field import FEMPhaseField
         from ifenn.fem.problem import FractureProblem
         from ifenn.fem.solver import NodalMap
-        from ifenn.hybrid.runs import make_inference
+        from ifenn.hybrid.runs import make_inference, slit_cuts
 
         self.spec = spec
+        self.cuts = slit_cuts(spec)
         self.material = spec["material"]
         self.stagger_max_iterations, self.crack_phi = int(stagger_max_iterations), float(crack_phi)
         domain = read_dolfinx_mesh(mesh_path, MPI.COMM_SELF)
@@ -171,13 +172,10 @@ class Replay:
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
         """Exact pixel phase field for a history image (pass it capped or not)."""
-        from ifenn.hybrid.runs import slit_cuts
         from ifenn.network.picnn import solve_pixel_equation
 
-        if not hasattr(self, "_cuts"):
-            self._cuts = slit_cuts(self.spec)
         return solve_pixel_equation(history, self.material["Gc"], self.material["lc"], self.h_px, self.spec["pixel_padding"],
-                                    maxiter=5000, cuts=self._cuts)
+                                    maxiter=5000, cuts=self.cuts)
 
     def capped(self, history: np.ndarray) -> np.ndarray:
         return np.clip(history, 0.0, self.spec["history_cap"])
