@@ -39,6 +39,8 @@ SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.
 #: the datasets of a saved increment; the first two are the pixel maps
 FIELD_KEYS = ("history", "phase_field_gp", "phase_field", "displacement")
 MAP_KEYS = FIELD_KEYS[:2]
+#: written where a state has them: the leaf level of each fine cell of an adaptive mesh (ifenn.adaptive)
+OPTIONAL_KEYS = ("leaf_level",)
 #: the pixel grid's root attributes
 GRID_ATTRS = ("x0", "y0", "h_px", "nx_px", "ny_px")
 
@@ -71,7 +73,7 @@ def write_fields(path: str | Path, attrs: dict, states: Iterable[dict]) -> None:
         for state in states:
             group = h5.create_group(_group(state["increment"]))
             group.attrs.update({"u": float(state["u"]), "increment": int(state["increment"])})
-            for key in FIELD_KEYS:
+            for key in FIELD_KEYS + tuple(k for k in OPTIONAL_KEYS if k in state):
                 values = np.asarray(state[key])
                 group.create_dataset(key, data=values[:, 0] if key == "phase_field" and values.ndim == 2 else values,
                                      compression="gzip")

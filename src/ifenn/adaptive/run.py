@@ -1,0 +1,303 @@
+"""A run whose displacement mesh follows the crack: the state on the pixel grid, the mesh rebuilt
+from it when the crack leaves the fine region, and the increment then redone.
+
+Per increment (single pass, or staggered to a tolerance as the FEM runs):
+
+1. u on the current mesh with phi of the last increment at its Gauss points
+   (:class:`ifenn.adaptive.problem.AdaptiveMeshProblem`);
+2. H = max(H of the last increment, psi_0^+(u)) at every pixel centre;
+3. phi from the pixel equation (Gc/lc + 2H) phi - Gc lc Lap9(phi) = 2H on the whole image, the
+   slits' links cut, solved by the multigrid-preconditioned CG of the verified step
+   (:meth:`ifenn.hybrid.verification.PixelEquation.solve_box`) from the last increment's phi, to
+   max |phi - exact pixel solution| <= ``phase_field_tolerance`` (the residual certificate);
+4. predictor-corrector: the pixels the criterion marks (:func:`marked_pixels`) must lie in the
+   finest leaves; if one does not, the mesh is rebuilt from the new marking and the increment
+   is redone from the last increment's images (at most ``max_remesh`` times; a run that still
+   leaves the region is reported in the row's ``outside_fine`` column, never silently).
+
+The refinement criterion (config ``adaptive_mesh``; reasoning here): a pixel is marked where
+phi >= ``mark_phi`` or where the history's local phase field 2H / (Gc/lc + 2H) >= ``mark_phi``
+(the damage the history drives before the smoothing Laplacian spreads it: it flags the tip's
+stress concentration an increment or more before phi follows), grown by ``buffer_lc`` phase-field
+lengths (the crack advances that far before the mesh must follow; a larger buffer means fewer
+redone increments and more dofs). The 2:1 grading does the rest; the mesh never coarsens where
+phi >= mark_phi, since the marking holds it.
+
+Outputs, as a FEM run's (:mod:`ifenn.run_files`): history.csv (with ``dofs``, ``cells``,
+``remeshes`` per increment), fields.h5 (pixel images: ``history``, ``phase_field_gp`` = phi,
+``phase_field`` = phi flattened, ``displacement`` = u at the pixel centres, and ``leaf_level`` of
+the fine cells: the mesh), provenance.json. The checkpoint holds the two images and the marked
+region, not the mesh: a resumed run rebuilds it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.ndimage
+
+from ifenn import run_files
+from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
+from ifenn.config import spec_hash
+from ifenn.fem.loading import load_control
+from ifenn.io import progress_bar, provenance
+from ifenn.pixels import PixelGrid, SlitCuts
+
+log = logging.getLogger(__name__)
+
+COLUMNS = ["increment", "u", "reaction_force", "phi_max", "stagger_iterations", "t_displacement_s", "t_phase_field_s",
+           "t_history_s", "t_remesh_s", "t_increment_s", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations"]
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """config ``adaptive_mesh`` (module doc)."""
+
+    levels: int = 3                     # the coarsest leaf is 2^levels fine cells wide
+    pixels_per_fine_cell: int = 1       # 1: the fine cells are the pixels (h/2 of the scene's elements)
+    mark_phi: float = 0.2
+    buffer_lc: float = 2.0
+    phase_field_tolerance: float = 1e-6
+    max_remesh: int = 6
+
+    @classmethod
+    def from_spec(cls, spec: dict) -> MeshSettings:
+        return cls(**spec.get("adaptive_mesh", {}))
+
+
+def fine_slits(scene: dict, h_fine: float) -> list[FineSlit]:
+    """The scene's slits, snapped to its element grid as the uniform mesh's
+    (:func:`ifenn.fem.mesh.build_mesh`), in fine-cell units."""
+    from ifenn.fem.mesh import _snap, element_size
+
+    h = element_size(scene)
+    factor = int(round(h / h_fine))
+    if abs(h / h_fine - factor) > 1e-9:
+        raise ValueError(f"the scene's elements ({h:g} mm) must be a whole number of fine cells ({h_fine:g} mm)")
+    x0, y0 = scene["domain"]["x"][0], scene["domain"]["y"][0]
+    nx, ny = scene["elements"]
+    out = []
+    for notch in scene.get("notches", []):
+        if notch["kind"] != "slit":
+            continue
+        (sx, sy), (ex, ey) = notch["start"], notch["end"]
+        if abs(sy - ey) <= abs(sx - ex):
+            a, b = sorted((_snap(sx, x0, h, nx), _snap(ex, x0, h, nx)))
+            out.append(FineSlit(0, factor * _snap(sy, y0, h, ny), factor * a, factor * b))
+        else:
+            a, b = sorted((_snap(sy, y0, h, ny), _snap(ey, y0, h, ny)))
+            out.append(FineSlit(1, factor * _snap(sx, x0, h, nx), factor * a, factor * b))
+    return out
+
+
+def initial_history(scene: dict, material: dict, grid: PixelGrid) -> np.ndarray:
+    """H0 of the scene's history notches at the pixel centres (as the uniform FEM's at its
+    Gauss points, :meth:`ifenn.fem.problem.FractureProblem.set_initial_history`)."""
+    from ifenn.fem.problem import _distance_to_segment
+
+    notches = [n for n in scene.get("notches", []) if n["kind"] == "history"]
+    if not notches:
+        return np.zeros(grid.shape)
+    Gc, lc, B = material["Gc"], material["lc"], material["history_notch_B"]
+    xc, yc = grid.pixel_centres()
+    points = np.stack(np.meshgrid(xc, yc), axis=-1).reshape(-1, 2)
+    distance = np.min([_distance_to_segment(points, n["start"], n["end"]) for n in notches], axis=0)
+    return np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0).reshape(grid.shape)
+
+
+def marked_pixels(phi: np.ndarray, history: np.ndarray, material: dict, h_px: float, settings: MeshSettings) -> np.ndarray:
+    """The pixels the displacement mesh must resolve finely (module doc), buffer included."""
+    local = 2.0 * history / (material["Gc"] / material["lc"] + 2.0 * history)
+    core = (phi >= settings.mark_phi) | (local >= settings.mark_phi)
+    grow = int(np.ceil(settings.buffer_lc * material["lc"] / h_px))
+    return scipy.ndimage.maximum_filter(core, size=2 * grow + 1, mode="constant") if grow else core
+
+
+class AdaptiveRun:
+    """One run on a displacement mesh that follows the crack (module doc)."""
+
+    def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True):
+        from ifenn.hybrid.verification import PixelEquation
+
+        self.spec, self.out_dir = spec, Path(out_dir)
+        self.work_dir = self.out_dir / run_files.WORK
+        self.settings = MeshSettings.from_spec(spec)
+        self.scene, self.material = spec["scene"], spec["material"]
+        self.grid = PixelGrid.for_scene(self.scene)
+        self.h_fine = self.grid.h_px * self.settings.pixels_per_fine_cell
+        p = self.settings.pixels_per_fine_cell
+        if self.grid.nx_px % p or self.grid.ny_px % p:
+            raise ValueError(f"adaptive_mesh.pixels_per_fine_cell = {p} must divide the pixel grid {self.grid.shape}")
+        self.n_fine = (self.grid.ny_px // p, self.grid.nx_px // p)
+        self.levels = coarsest_levels(self.n_fine[1], self.n_fine[0], self.settings.levels)
+        self.slits = fine_slits(self.scene, self.h_fine)
+        Gc, lc = self.material["Gc"], self.material["lc"]
+        self.equation = PixelEquation(Gc, lc, self.grid.h_px, "replicate", SlitCuts.for_scene(self.scene, self.grid))
+        self.loads = load_control(spec)
+        if self.loads.adaptive:
+            raise ValueError("adaptive meshes run fixed load schedules only (an adaptive step controller is not wired in)")
+        self.progress, self.hash = progress, spec_hash(spec)
+        self.rows: list[dict] = []
+        self.history = initial_history(self.scene, self.material, self.grid)
+        self.phi = np.zeros(self.grid.shape)
+        self.region = marked_pixels(self.phi, self.history, self.material, self.grid.h_px, self.settings)
+        self.problem = None
+
+    # ------------------------------------------------------------------ mesh
+    def _target(self, region: np.ndarray) -> np.ndarray:
+        """Fine-cell target levels: the finest where a fine cell holds a marked pixel."""
+        p = self.settings.pixels_per_fine_cell
+        ny, nx = self.n_fine
+        fine = region.reshape(ny, p, nx, p).any(axis=(1, 3))
+        return np.where(fine, self.levels, 0)
+
+    def build_mesh(self, region: np.ndarray) -> None:
+        from ifenn.adaptive.problem import AdaptiveMeshProblem
+
+        self.region = region
+        tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits)
+        self.problem = AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
+
+    def inside_fine(self, marked: np.ndarray) -> bool:
+        """Whether every marked pixel lies in a finest leaf."""
+        tree: Quadtree = self.problem.tree
+        p = self.settings.pixels_per_fine_cell
+        finest = np.repeat(np.repeat(tree.leaf_level == self.levels, p, axis=0), p, axis=1)
+        return bool(finest[marked].all())
+
+    # ------------------------------------------------------------------ state
+    def _checkpoint(self, increment: int) -> None:
+        rows = np.array([[row[c] for c in COLUMNS] for row in self.rows], dtype=float)
+        run_files.write_state(self.work_dir / "checkpoint.npz", {"history": self.history, "phase_field": self.phi, "region": self.region,
+                                                                 "rows": rows, "increment": increment, "spec_hash": self.hash})
+
+    def _resume(self) -> int:
+        path = self.work_dir / "checkpoint.npz"
+        if not path.exists():
+            return 0
+        data = run_files.read_state(path)
+        if str(data["spec_hash"]) != self.hash:
+            log.warning("ignoring checkpoint of another configuration (%s)", path)
+            return 0
+        self.history, self.phi, self.region = data["history"], data["phase_field"], data["region"].astype(bool)
+        self.rows = [dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()]
+        for row in self.rows:
+            for key in ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations"):
+                row[key] = int(row[key])
+        log.info("resuming %s after increment %d", self.spec["name"], int(data["increment"]))
+        return int(data["increment"])
+
+    def _snapshot(self, increment: int, u: float) -> None:
+        problem = self.problem
+        run_files.write_state(self.work_dir / f"fields_{increment:06d}.npz", {
+            "increment": increment, "u": u, "history": self.history, "phase_field_gp": self.phi, "phase_field": self.phi.ravel(),
+            "displacement": problem.displacement_at_pixels(), "leaf_level": problem.tree.leaf_level})
+
+    # ------------------------------------------------------------------ loop
+    def run(self) -> list[dict]:
+        started = time.perf_counter()
+        self.work_dir.mkdir(parents=True, exist_ok=True)
+        first = self._resume() + 1
+        self.build_mesh(self.region)
+        save = set(self.spec["save_fields"])
+        bar = progress_bar(total=self.loads.increments, initial=first - 1, desc=self.spec["name"], unit="inc",
+                           dynamic_ncols=True) if self.progress else None
+        increment = first
+        while (u := self.loads.next_load(increment, 0.0)) is not None:
+            try:
+                row = self.solve_increment(increment, u)
+            except Exception as error:
+                if bar is not None:
+                    bar.close()
+                raise type(error)(f"run {self.spec['name']}, increment {increment} (u = {u:g} mm): {error}") from error
+            self.rows.append(row)
+            last = self.loads.is_last(increment, u)
+            if increment in save or last:
+                self._snapshot(increment, u)
+            if increment % self.spec["checkpoint_every"] == 0 or last:
+                self._checkpoint(increment)
+            if bar is not None:
+                bar.set_postfix(F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", dofs=row["dofs"], refresh=False)
+                bar.update(1)
+            increment += 1
+        if bar is not None:
+            bar.close()
+        self._finish(time.perf_counter() - started)
+        return self.rows
+
+    def solve_increment(self, increment: int, u: float) -> dict:
+        """One increment at prescribed displacement ``u``, redone on a new mesh while the crack
+        leaves the fine region (module doc). Returns its history row."""
+        settings, spec = self.settings, self.spec
+        times = dict.fromkeys(("t_displacement_s", "t_phase_field_s", "t_history_s", "t_remesh_s"), 0.0)
+        started = time.perf_counter()
+        remeshes = pf_iterations = 0
+        while True:
+            problem = self.problem
+            problem.set_phase_field(self.phi)
+            phi = self.phi.copy()
+            for iteration in range(1, spec["stagger_max_iterations"] + 1):
+                staggered = iteration
+                t = time.perf_counter()
+                problem.solve_displacement(u)
+                times["t_displacement_s"] += time.perf_counter() - t
+                t = time.perf_counter()
+                history = np.maximum(self.history, problem.tensile_energy())
+                times["t_history_s"] += time.perf_counter() - t
+                t = time.perf_counter()
+                before = phi.copy()
+                _, iterations = self.equation.solve_box(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])),
+                                                        settings.phase_field_tolerance)
+                pf_iterations += iterations
+                problem.set_phase_field(phi)
+                times["t_phase_field_s"] += time.perf_counter() - t
+                if np.abs(phi - before).max() < spec["stagger_tolerance"]:
+                    break
+            marked = marked_pixels(phi, history, self.material, self.grid.h_px, settings)
+            outside = not self.inside_fine(marked)
+            if not outside or remeshes == settings.max_remesh:
+                break
+            t = time.perf_counter()
+            self.build_mesh(marked | (self.phi >= settings.mark_phi))
+            times["t_remesh_s"] += time.perf_counter() - t
+            remeshes += 1
+        self.history, self.phi = history, phi
+        force = problem.reaction_force()
+        if not np.isfinite(force):
+            raise FloatingPointError(f"non-finite reaction force {force}")
+        return {"increment": increment, "u": u, "reaction_force": force, "phi_max": float(phi.max()), "stagger_iterations": staggered,
+                **times, "t_increment_s": time.perf_counter() - started, "dofs": problem.n_dofs, "cells": problem.tree.n_cells,
+                "remeshes": remeshes, "outside_fine": int(outside), "phase_field_iterations": pf_iterations}
+
+    # ------------------------------------------------------------------ outputs
+    def _finish(self, wall_s: float) -> None:
+        import pandas as pd
+
+        def states():
+            for path in sorted(self.work_dir.glob("fields_*.npz")):
+                yield run_files.read_state(path)
+
+        attrs = {**self.grid.attrs(), "run": self.spec["name"], "spec_hash": self.hash, "switch_increment": -1}
+        run_files.write_fields(self.out_dir / run_files.FIELDS, attrs, states())
+        run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=COLUMNS))
+        run_files.write_provenance(self.out_dir, provenance(self.hash, wall_s, run=self.spec["name"], mpi_ranks=1,
+                                                           phase_field_step="pixel-exact", increments=len(self.rows),
+                                                           displacement_mesh="adaptive"))
+        for path in self.work_dir.glob("*"):
+            path.unlink()
+        self.work_dir.rmdir()
+
+
+def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True) -> list[dict]:
+    """Run ``spec`` (a FEM run's spec with an ``adaptive_mesh`` section) on a mesh that follows
+    the crack; one process at a time writes ``out_dir``."""
+    from mpi4py import MPI
+
+    if MPI.COMM_WORLD.size > 1:
+        raise RuntimeError("adaptive-mesh runs are serial: start them on one process")
+    with run_files.exclusive_writer(out_dir, MPI.COMM_WORLD):
+        return AdaptiveRun(spec, out_dir, progress).run()

@@ -1,0 +1,178 @@
+"""The displacement mesh that follows the crack (ifenn.adaptive): the graded quadtree, its
+hanging-node constraints (patch test), and runs on the quick scenes against the uniform fine FEM."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from ifenn import run_files
+from ifenn.adaptive.quadtree import FineSlit, build_quadtree, coarsest_levels, leaf_levels
+
+MATERIAL = {"lame_lambda": 121154.0, "lame_mu": 80770.0, "Gc": 2.7, "lc": 0.03, "residual_stiffness": 0.0, "history_notch_B": 1e3}
+DIRECT = {"ksp_type": "preonly", "pc_type": "lu"}
+
+
+def _graded_tree(slits=()):
+    target = np.zeros((32, 32), dtype=int)
+    target[10:13, 12:21] = 3
+    target[20, 3] = 2
+    return build_quadtree(target, 3, (0.0, 0.0), 1 / 32, slits)
+
+
+# ------------------------------------------------------------------ the quadtree
+def test_leaves_tile_the_grid_two_to_one():
+    tree = _graded_tree()
+    assert (tree.cell_size**2).sum() == 32 * 32
+    assert set(np.unique(tree.cell_size)) == {1, 2, 4, 8}
+    level = tree.leaf_level
+    assert np.abs(np.diff(level, axis=0)).max() <= 1 and np.abs(np.diff(level, axis=1)).max() <= 1
+    # every hanging node is the midpoint of its two masters, and no master hangs
+    ij = tree.node_ij
+    assert len(tree.hanging) > 0
+    np.testing.assert_array_equal(2 * ij[tree.hanging], ij[tree.masters[:, 0]] + ij[tree.masters[:, 1]])
+    assert not np.isin(tree.masters, tree.hanging).any()
+
+
+def test_leaf_levels_meet_the_target_and_no_more():
+    target = np.zeros((16, 16), dtype=int)
+    target[5, 9] = 2
+    level = leaf_levels(target, 2)
+    assert level[5, 9] == 2 and (level >= target).all()
+    # one level-0 block (4 x 4 fine cells) split into level-1 blocks, one of which is split into fine cells
+    assert (level == 2).sum() == 4 and (level == 1).sum() == 12 and (level[4:8, 8:12] >= 1).all()
+    assert coarsest_levels(400, 400, 4) == 4 and coarsest_levels(200, 100, 4) == 2
+
+
+def test_slit_nodes_are_doubled_for_the_upper_side_and_the_tip_is_shared():
+    slit = FineSlit(axis=0, line=16, start=0, stop=12)
+    tree = _graded_tree([slit])
+    points = tree.points
+    on_slit = (tree.node_ij[:, 1] == 16) & (tree.node_ij[:, 0] <= 12)
+    doubled = set(tree.twin_of.tolist())
+    assert doubled == set(np.flatnonzero(on_slit & (tree.node_ij[:, 0] < 12)).tolist())   # the tip (x = 12) is shared
+    above = tree.cell_origin[:, 1] == 16
+    below = tree.cell_origin[:, 1] + tree.cell_size == 16
+    left = tree.cell_origin[:, 0] + tree.cell_size <= 12
+    nodes_above = set(tree.cells[above & left].ravel().tolist())
+    nodes_below = set(tree.cells[below & left].ravel().tolist())
+    shared = {n for n in nodes_above & nodes_below if abs(points[n, 1] - 0.5) < 1e-12 and points[n, 0] < 12 / 32 - 1e-12}
+    assert shared == set()     # the two faces share no node left of the tip
+    # leaves face each other across the slit at the same level
+    np.testing.assert_array_equal(tree.leaf_level[15, :12], tree.leaf_level[16, :12])
+
+
+# ------------------------------------------------------------------ the mesh problem
+SCENE = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [16, 16],
+         "boundary": {"bottom": {"y": "fixed"}, "left": {"x": "fixed"}, "top": {"y": "load"}}}
+
+
+def _problem(tree, scene=SCENE):
+    from ifenn.adaptive.problem import AdaptiveMeshProblem
+    from ifenn.pixels import PixelGrid
+
+    return AdaptiveMeshProblem(tree, scene, MATERIAL, DIRECT, PixelGrid.for_scene(scene))
+
+
+def test_patch_test_on_a_graded_mesh_with_hanging_nodes():
+    """Uniaxial plane strain (bottom held in y, left in x, top moved): the exact field is linear,
+    and Q1 with hanging-node constraints must reproduce it at every node, hanging ones included,
+    with the analytic reaction force (lambda + 2 mu - lambda^2 / (lambda + 2 mu)) eps L."""
+    tree = _graded_tree()
+    problem = _problem(tree)
+    problem.set_phase_field(np.zeros(problem.pixels.shape))
+    problem.solve_displacement(1e-3)
+    lam, mu = MATERIAL["lame_lambda"], MATERIAL["lame_mu"]
+    u = problem.displacement.x.array.reshape(-1, 2)
+    x = problem.V.tabulate_dof_coordinates()[:, :2]
+    np.testing.assert_allclose(u[:, 1], 1e-3 * x[:, 1], atol=1e-14)
+    np.testing.assert_allclose(u[:, 0], -lam / (lam + 2 * mu) * 1e-3 * x[:, 0], atol=1e-14)
+    assert problem.reaction_force() == pytest.approx((lam + 2 * mu - lam**2 / (lam + 2 * mu)) * 1e-3, rel=1e-10)
+    # psi+ at every pixel centre: the uniform value
+    psi = problem.tensile_energy()
+    np.testing.assert_allclose(psi, psi.mean(), rtol=1e-9)
+
+
+def test_phase_field_at_gauss_points_is_the_pixel_or_its_quadrant_mean():
+    tree = _graded_tree()
+    problem = _problem(tree)
+    rng = np.random.default_rng(0)
+    phi = rng.random(problem.pixels.shape)
+    problem.set_phase_field(phi)
+    values = problem.phase_field_gp.x.array
+    assert values.min() >= phi.min() and values.max() <= phi.max()
+    # a constant image gives the constant, and the mean over the image is kept (equal-area quadrants)
+    problem.set_phase_field(np.full(problem.pixels.shape, 0.3))
+    np.testing.assert_allclose(problem.phase_field_gp.x.array, 0.3)
+    problem.set_phase_field(phi)
+    weights = problem.cell_size_px.repeat(4).astype(float) ** 2   # Gauss point share of the area, per cell, times 4
+    q = problem.q_dofs.ravel()
+    assert np.sum(values[q] * weights) / weights.sum() == pytest.approx(phi.mean(), rel=1e-12)
+
+
+# ------------------------------------------------------------------ runs on the quick scenes
+@pytest.fixture(scope="module")
+def adaptive_and_fine(quick_config, tmp_path_factory):
+    """The quick snt1-II on the adaptive mesh (every increment saved) and the uniform FEM on the
+    pixel grid's spacing (snt1-II-fine), which the adaptive run's fine cells match."""
+    from conftest import quick_fem_run
+
+    from ifenn.adaptive.run import run_adaptive
+    from ifenn.config import fem_run_spec
+
+    spec = copy.deepcopy(fem_run_spec(quick_config, "snt1-II"))
+    spec.update(name="snt1-II-adaptive", adaptive_mesh={"levels": 3}, checkpoint_every=5, save_fields=list(range(1, 41)))
+    out = tmp_path_factory.mktemp("adaptive") / "run"
+    adaptive = pd.DataFrame(run_adaptive(spec, out, progress=False))
+    *_, fine = quick_fem_run(quick_config, tmp_path_factory, "snt1-II-fine", "fine")
+    return spec, out, adaptive, fine
+
+
+def test_adaptive_run_matches_the_uniform_fine_fem(adaptive_and_fine):
+    """Quick snt1-II: the adaptive run against FEM on twice the elements (the converged
+    reference): peak within 0.5 %, post-peak RMS within 1 % of the peak (measured 0.03 % and
+    0.16 %; FEM at h: 0.42 % and 1.02 %), and fewer dofs than the fine mesh before the peak."""
+    _, _, adaptive, fine = adaptive_and_fine
+    f_a, f_f = adaptive.reaction_force.to_numpy(), fine.reaction_force.to_numpy()
+    peak, k = f_f.max(), int(np.argmax(f_f))
+    assert abs(f_a.max() / peak - 1) < 5e-3
+    assert np.sqrt(np.mean((f_a[k + 1:] - f_f[k + 1:]) ** 2)) / peak < 1e-2
+    assert adaptive.dofs.iloc[0] < 0.1 * 2 * 81 * 81
+    assert (adaptive.outside_fine == 0).all() and adaptive.remeshes.sum() > 0
+
+
+def test_fine_region_holds_the_crack_and_history_never_decreases(adaptive_and_fine):
+    spec, out, adaptive, _ = adaptive_and_fine
+    states = run_files.read_states(out / run_files.FIELDS, keys=("history", "phase_field_gp", "leaf_level"))
+    assert len(states) == len(adaptive)
+    remeshed = set(adaptive.increment[adaptive.remeshes > 0])
+    for before, after in zip(states, states[1:], strict=False):
+        assert (after["history"] >= before["history"]).all(), f"H decreased at increment {after['increment']}"
+        finest = after["leaf_level"] == spec["adaptive_mesh"]["levels"]   # one pixel per fine cell (the default)
+        assert finest[after["phase_field_gp"] >= 0.5].all(), f"phi >= 0.5 outside the fine region at {after['increment']}"
+    assert remeshed, "the test must see a remesh"
+
+
+def test_killed_adaptive_run_resumes_to_the_same_history(adaptive_and_fine, tmp_path, monkeypatch):
+    from ifenn.adaptive.run import AdaptiveRun, run_adaptive
+
+    spec, _, adaptive, _ = adaptive_and_fine
+    spec = {**spec, "load": spec["load"][:14], "save_fields": [7, 14]}
+    original = AdaptiveRun.solve_increment
+
+    def killed(self, increment, u):
+        if increment == 12:
+            raise KeyboardInterrupt("killed")
+        return original(self, increment, u)
+
+    monkeypatch.setattr(AdaptiveRun, "solve_increment", killed)
+    with pytest.raises(KeyboardInterrupt):
+        run_adaptive(spec, tmp_path / "run", progress=False)
+    assert (tmp_path / "run" / run_files.WORK / "checkpoint.npz").exists()
+    monkeypatch.setattr(AdaptiveRun, "solve_increment", original)
+    resumed = pd.DataFrame(run_adaptive(spec, tmp_path / "run", progress=False))
+    np.testing.assert_allclose(resumed.reaction_force, adaptive.reaction_force[:14], rtol=1e-6)
+    np.testing.assert_array_equal(resumed.dofs, adaptive.dofs[:14])
