@@ -19,6 +19,7 @@ localrules:
     all,
     fem_spec,
     ifenn_spec,
+    adaptive_spec,
     stability_cell_spec,
 
 
@@ -32,6 +33,7 @@ include: "workflow/rules/figures.smk"
 include: "workflow/rules/stability.smk"
 include: "workflow/rules/error_sources.smk"
 include: "workflow/rules/whole_path.smk"
+include: "workflow/rules/adaptive.smk"
 
 
 rule all:
@@ -58,3 +60,4 @@ rule all:
         ["results/tables/whole_path.csv", "results/figures/whole_path.png"] if config.get("whole_path") else [],
         ["results/tables/reference_convergence.csv", "results/figures/reference_convergence.png"] if config.get("reference_convergence") else [],
         ["results/benchmarks/whole_run_speed.csv", "results/figures/whole_run_speed.png"] if config.get("whole_run_benchmark") else [],
+        ["results/tables/adaptive_resolution.csv", "results/figures/adaptive_resolution.png", "results/figures/adaptive_mesh.png"] if config.get("adaptive_resolution") else [],

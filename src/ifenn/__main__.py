@@ -2,6 +2,7 @@
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] --out DIR
+  python -m ifenn adaptive --spec SPEC.json --out DIR   (a displacement mesh that follows the crack; one process)
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
   python -m ifenn stage-times [WORKDIR]   what a workflow run spent per stage (its benchmark files)
 """
@@ -29,6 +30,10 @@ def main(argv=None) -> int:
     hybrid.add_argument("--model", default=None, help="trained PICNN (needed when the predictor is 'picnn')")
     hybrid.add_argument("--out", required=True)
     hybrid.add_argument("--no-progress", action="store_true")
+    adaptive = sub.add_parser("adaptive", help="run a FEM run's scene and schedule on a displacement mesh that follows the crack")
+    adaptive.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.adaptive_run_spec)")
+    adaptive.add_argument("--out", required=True)
+    adaptive.add_argument("--no-progress", action="store_true")
     cell = sub.add_parser("cell", help="one stability-sweep cell: FEM, or IFENN continuing --fem-dir; failures are recorded")
     cell.add_argument("--spec", required=True)
     cell.add_argument("--out", required=True)
@@ -59,6 +64,12 @@ def main(argv=None) -> int:
         if args.fem_dir is None and spec.get("switch_over", "phi_threshold") != "start":
             parser.error(f"run {spec['name']} switches over from a FEM run ({spec.get('switch_over', 'phi_threshold')}): --fem-dir is needed")
         run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
+    elif args.command == "adaptive":
+        from ifenn.adaptive.run import run_adaptive
+
+        with open(args.spec) as stream:
+            spec = json.load(stream)
+        run_adaptive(spec, args.out, progress=not args.no_progress)
     elif args.command == "cell":
         from ifenn.studies.stability import run_cell
 

@@ -136,7 +136,7 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH, petsc_names: 
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     config = copy.deepcopy(config)
     _fill_defaults(config, schema, schema)
-    problems = _semantic_problems(config, petsc_names)
+    problems = _semantic_problems(config, petsc_names) + _adaptive_problems(config, schema)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     return config
@@ -379,6 +379,54 @@ def _reference_convergence_problems(config: dict) -> list[str]:
                 problems.append(f"config key '{key}.ifenn_runs[{k}]': '{run}' continues FEM run '{ifenn_runs[run]['fem_run']}', "
                                 f"not '{entry['fem_run']}'")
     return problems
+
+
+def _adaptive_problems(config: dict, schema: dict) -> list[str]:
+    """Adaptive runs: a FEM run with a fixed schedule, settings in range once merged, a
+    trigger inside the buffer; adaptive_resolution cases name existing runs of their FEM run."""
+    problems = []
+    fem_runs, adaptive_runs = config.get("fem_runs", {}), config.get("adaptive_runs", {})
+    settings_schema = schema["properties"]["adaptive_mesh"]
+    validator = jsonschema.Draft202012Validator(settings_schema)
+    for name, entry in adaptive_runs.items():
+        key = f"adaptive_runs.{name}"
+        if entry["fem_run"] not in fem_runs:
+            problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' is not a FEM run; allowed: {sorted(fem_runs)}")
+        elif schedule_increments(config["schedules"][fem_runs[entry["fem_run"]]["schedule"]]) is None:
+            problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
+                            "run fixed schedules")
+        merged = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
+        for err in validator.iter_errors(merged):
+            where = ".".join(map(str, err.absolute_path)) or ""
+            owner = f"{key}.adaptive_mesh" if (where.split(".")[0] in entry.get("adaptive_mesh", {}) or not where) else "adaptive_mesh"
+            problems.append(f"config key '{owner}{'.' + where if where else ''}': {err.message}")
+        trigger, buffer = merged.get("trigger_lc", 1.5), merged.get("buffer_lc", 3.0)
+        if isinstance(trigger, int | float) and isinstance(buffer, int | float) and trigger > buffer:
+            problems.append(f"config key '{key}.adaptive_mesh.trigger_lc': {trigger} exceeds buffer_lc {buffer}; the mesh "
+                                "must be rebuilt before the crack core leaves the fine region")
+    for case, entry in config.get("adaptive_resolution", {}).items():
+        key = f"adaptive_resolution.{case}"
+        for field in ("fem_run", "fine_fem_run"):
+            if entry[field] not in fem_runs:
+                problems.append(f"config key '{key}.{field}': '{entry[field]}' is not a FEM run; allowed: {sorted(fem_runs)}")
+        for k, run in enumerate(entry["adaptive_runs"]):
+            if run not in adaptive_runs:
+                problems.append(f"config key '{key}.adaptive_runs[{k}]': '{run}' is not an adaptive run; allowed: {sorted(adaptive_runs)}")
+            elif adaptive_runs[run]["fem_run"] != entry["fem_run"]:
+                problems.append(f"config key '{key}.adaptive_runs[{k}]': '{run}' runs FEM run '{adaptive_runs[run]['fem_run']}', "
+                                f"not '{entry['fem_run']}'")
+    return problems
+
+
+def adaptive_run_spec(config: dict, run: str) -> dict:
+    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers) and the merged
+    ``adaptive_mesh`` settings (:class:`ifenn.adaptive.run.MeshSettings`)."""
+    if run not in config.get("adaptive_runs", {}):
+        raise ConfigError(f"unknown adaptive run '{run}'; allowed: {sorted(config.get('adaptive_runs', {}))}")
+    entry = config["adaptive_runs"][run]
+    spec = fem_run_spec(config, entry["fem_run"])
+    spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh={**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})})
+    return spec
 
 
 SWITCH_OVER = ("phi_threshold", "increment", "start")

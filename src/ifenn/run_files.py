@@ -206,5 +206,9 @@ def write_status(run_dir: str | Path, status: dict) -> None:
     write_json(Path(run_dir) / STATUS, status)
 
 
+def read_provenance(run_dir: str | Path) -> dict:
+    return json.loads((Path(run_dir) / PROVENANCE).read_text())
+
+
 def write_provenance(run_dir: str | Path, record: dict) -> None:
     write_json(Path(run_dir) / PROVENANCE, record)

@@ -4,7 +4,7 @@ import sys
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn.config import ConfigError, fem_run_spec, ifenn_run_spec, schedule_increments, switch_over, training_spec, validate_config
+from ifenn.config import ConfigError, adaptive_run_spec, fem_run_spec, ifenn_run_spec, schedule_increments, switch_over, training_spec, validate_config
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 

@@ -10,18 +10,24 @@ Per increment (single pass, or staggered to a tolerance as the FEM runs):
    slits' links cut, solved by the multigrid-preconditioned CG of the verified step
    (:meth:`ifenn.hybrid.verification.PixelEquation.solve_box`) from the last increment's phi, to
    max |phi - exact pixel solution| <= ``phase_field_tolerance`` (the residual certificate);
-4. predictor-corrector: the pixels the criterion marks (:func:`marked_pixels`) must lie in the
-   finest leaves; if one does not, the mesh is rebuilt from the new marking and the increment
+4. predictor-corrector: the crack core (:func:`crack_core`) grown by ``trigger_lc`` must lie in the
+   finest leaves; if it does not, the fine region grows by the new core and its buffer, the mesh is
+   rebuilt, and the increment
    is redone from the last increment's images (at most ``max_remesh`` times; a run that still
    leaves the region is reported in the row's ``outside_fine`` column, never silently).
 
-The refinement criterion (config ``adaptive_mesh``; reasoning here): a pixel is marked where
-phi >= ``mark_phi`` or where the history's local phase field 2H / (Gc/lc + 2H) >= ``mark_phi``
-(the damage the history drives before the smoothing Laplacian spreads it: it flags the tip's
-stress concentration an increment or more before phi follows), grown by ``buffer_lc`` phase-field
-lengths (the crack advances that far before the mesh must follow; a larger buffer means fewer
-redone increments and more dofs). The 2:1 grading does the rest; the mesh never coarsens where
-phi >= mark_phi, since the marking holds it.
+The refinement criterion (config ``adaptive_mesh``; reasoning here): the crack's core is where
+phi >= ``mark_phi`` (the crack and its process zone), or where the history's local phase field
+2H / (Gc/lc + 2H) >= ``mark_history_phi`` (the damage the history drives before the smoothing
+Laplacian spreads it: it flags the tip's stress concentration increments before phi follows, so
+that H, a max over the past, is never taken from a coarse cell at the tip; lower than mark_phi
+for that reason, and above the far field's ~0.03 at the peak, so the far field stays coarse).
+The mesh is built fine on the core grown by ``buffer_lc`` phase-field lengths, and rebuilt when
+the core grown by ``trigger_lc`` (< buffer_lc) leaves the finest leaves: the crack advances
+buffer_lc - trigger_lc before the mesh must follow (a hysteresis: the finer mesh resolves the
+tip better, raises H there and grows the core, and without the gap each rebuild would ask for
+another). The 2:1 grading does the rest; the mesh never coarsens where phi >= mark_phi, since
+the core holds it.
 
 Outputs, as a FEM run's (:mod:`ifenn.run_files`): history.csv (with ``dofs``, ``cells``,
 ``remeshes`` per increment), fields.h5 (pixel images: ``history``, ``phase_field_gp`` = phi,
@@ -60,7 +66,9 @@ class MeshSettings:
     levels: int = 3                     # the coarsest leaf is 2^levels fine cells wide
     pixels_per_fine_cell: int = 1       # 1: the fine cells are the pixels (h/2 of the scene's elements)
     mark_phi: float = 0.2
-    buffer_lc: float = 2.0
+    mark_history_phi: float = 0.05
+    buffer_lc: float = 3.0
+    trigger_lc: float = 1.5
     phase_field_tolerance: float = 1e-6
     max_remesh: int = 6
 
@@ -109,12 +117,16 @@ def initial_history(scene: dict, material: dict, grid: PixelGrid) -> np.ndarray:
     return np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0).reshape(grid.shape)
 
 
-def marked_pixels(phi: np.ndarray, history: np.ndarray, material: dict, h_px: float, settings: MeshSettings) -> np.ndarray:
-    """The pixels the displacement mesh must resolve finely (module doc), buffer included."""
+def crack_core(phi: np.ndarray, history: np.ndarray, material: dict, settings: MeshSettings) -> np.ndarray:
+    """The pixels of the crack and the tip's stress concentration (module doc)."""
     local = 2.0 * history / (material["Gc"] / material["lc"] + 2.0 * history)
-    core = (phi >= settings.mark_phi) | (local >= settings.mark_phi)
-    grow = int(np.ceil(settings.buffer_lc * material["lc"] / h_px))
-    return scipy.ndimage.maximum_filter(core, size=2 * grow + 1, mode="constant") if grow else core
+    return (phi >= settings.mark_phi) | (local >= settings.mark_history_phi)
+
+
+def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.ndarray:
+    """``core`` grown by ``by_lc`` phase-field lengths (a square of that half-width)."""
+    by = int(np.ceil(by_lc * material["lc"] / h_px))
+    return scipy.ndimage.maximum_filter(core, size=2 * by + 1, mode="constant") if by else core.copy()
 
 
 class AdaptiveRun:
@@ -144,10 +156,14 @@ class AdaptiveRun:
         self.rows: list[dict] = []
         self.history = initial_history(self.scene, self.material, self.grid)
         self.phi = np.zeros(self.grid.shape)
-        self.region = marked_pixels(self.phi, self.history, self.material, self.grid.h_px, self.settings)
+        self.region = self._fine_region(self.phi, self.history)
         self.problem = None
 
     # ------------------------------------------------------------------ mesh
+    def _fine_region(self, phi: np.ndarray, history: np.ndarray, by_lc: float | None = None) -> np.ndarray:
+        core = crack_core(phi, history, self.material, self.settings)
+        return grown(core, self.settings.buffer_lc if by_lc is None else by_lc, self.material, self.grid.h_px)
+
     def _target(self, region: np.ndarray) -> np.ndarray:
         """Fine-cell target levels: the finest where a fine cell holds a marked pixel."""
         p = self.settings.pixels_per_fine_cell
@@ -257,12 +273,11 @@ class AdaptiveRun:
                 times["t_phase_field_s"] += time.perf_counter() - t
                 if np.abs(phi - before).max() < spec["stagger_tolerance"]:
                     break
-            marked = marked_pixels(phi, history, self.material, self.grid.h_px, settings)
-            outside = not self.inside_fine(marked)
+            outside = not self.inside_fine(self._fine_region(phi, history, settings.trigger_lc))
             if not outside or remeshes == settings.max_remesh:
                 break
             t = time.perf_counter()
-            self.build_mesh(marked | (self.phi >= settings.mark_phi))
+            self.build_mesh(self.region | self._fine_region(phi, history))
             times["t_remesh_s"] += time.perf_counter() - t
             remeshes += 1
         self.history, self.phi = history, phi

@@ -570,3 +570,69 @@ def reference_convergence_figure(curves: dict, table, path) -> None:
     fig.suptitle("Which discretisation is right after the peak: IFENN and its FEM reference against a finer FEM", fontsize=9)
     fig.tight_layout()
     _save(fig, path)
+
+
+def adaptive_resolution_figure(curves: dict, table, path) -> None:
+    """Per case (columns): the force curves of FEM at h, the finer uniform FEM and the adaptive runs
+    (top); each curve's |F| - |F| of the finer FEM over the finer peak (middle); the adaptive runs'
+    displacement dofs over the finer mesh's (bottom). ``curves``: case -> {label: history} (FEM at h
+    first, the finer FEM second); ``table``: ifenn.studies.adaptive_resolution.adaptive_resolution_table."""
+    cases = list(curves)
+    fig, axes = plt.subplots(3, len(cases), figsize=(4.8 * len(cases) + 0.6, 8.4), squeeze=False, sharex="col",
+                             gridspec_kw={"height_ratios": [2.2, 1.2, 1.0]})
+    for k, case in enumerate(cases):
+        numbers = table[table.case == case].set_index("run")
+        labels = list(curves[case])
+        fine = curves[case][labels[1]]
+        u_fine, f_fine = fine.u.to_numpy(), fine.reaction_force.abs().to_numpy()
+        peak = f_fine.max()
+        top, middle, bottom = axes[0, k], axes[1, k], axes[2, k]
+        colours = iter(["tab:red", "tab:blue", "tab:green", "tab:purple"])
+        for j, label in enumerate(labels):
+            history = curves[case][label]
+            u, force = history.u.to_numpy(), history.reaction_force.abs().to_numpy()
+            style = [dict(color="k", lw=1.2, ls="--"), dict(color="k", lw=1.6, ls=":")][j] if j < 2 else dict(color=next(colours), lw=1.2)
+            run = label.split(" ", 2)[1]
+            if j != 1:
+                r = numbers.loc[run]
+                label = (f"{label}: peak {r.peak_error_vs_fine_pct:+.2f} %, post-peak RMS {r.post_peak_rms_vs_fine_pct:.2f} %, "
+                         f"{r.wall_s:.0f} s, dofs {100 * r.dofs_fraction_of_fine:.0f} % of fine")
+            top.plot(u, force, label=label, **style)
+            if j != 1:
+                middle.plot(u, 100 * (force - np.interp(u, u_fine, f_fine)) / peak, **style)
+            if "dofs" in history:
+                # the row's mean fraction fixes the scale: dofs / fine dofs = dofs x (mean fraction / mean dofs)
+                bottom.plot(u, 100 * history.dofs.to_numpy() * numbers.loc[run].dofs_fraction_of_fine / history.dofs.mean(), **style)
+        top.set_title(f"{case}: against the finer uniform FEM", fontsize=8)
+        top.set_ylabel("reaction force (N/mm)" if k == 0 else "")
+        top.legend(fontsize=5.5)
+        middle.axhline(0.0, color="0.6", lw=0.6)
+        middle.set_ylabel("|F| - |F| finer (% of its peak)" if k == 0 else "", fontsize=7)
+        bottom.set_ylabel("dofs (% of the finer mesh)" if k == 0 else "", fontsize=7)
+        bottom.axhline(30, color="0.6", lw=0.6, ls="--")
+        bottom.set_xlabel("u (mm)")
+    fig.suptitle("A displacement mesh that follows the crack: accuracy against the converged reference, and its cost", fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> None:
+    """The adaptive mesh over the phase field at a few saved increments: ``states`` (dicts with
+    increment, u, phase_field_gp and leaf_level), ``tree_of(leaf_level)`` -> its Quadtree."""
+    from matplotlib.collections import PolyCollection
+
+    fig, axes = plt.subplots(1, len(states), figsize=(4.2 * len(states), 4.4), squeeze=False)
+    for ax, state in zip(axes[0], states, strict=True):
+        tree = tree_of(state["leaf_level"])
+        x0, y0 = tree.origin
+        extent = [x0, x0 + tree.nx * tree.h_fine, y0, y0 + tree.ny * tree.h_fine]
+        ax.imshow(state["phase_field_gp"], origin="lower", extent=extent, cmap="Reds", vmin=0, vmax=1)
+        corners = tree.origin + tree.h_fine * (tree.cell_origin[:, None, :] + tree.cell_size[:, None, None] * np.array([[0, 0], [1, 0], [1, 1], [0, 1]]))
+        ax.add_collection(PolyCollection(corners, facecolors="none", edgecolors="0.25", linewidths=0.15))
+        ax.set_title(f"increment {state['increment']}, u = {state['u']:.4g} mm: {tree.n_cells} cells", fontsize=8)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    _save(fig, path)
