@@ -33,7 +33,13 @@ Outputs, as a FEM run's (:mod:`ifenn.run_files`): history.csv (with ``dofs``, ``
 ``remeshes`` per increment), fields.h5 (pixel images: ``history``, ``phase_field_gp`` = phi,
 ``phase_field`` = phi flattened, ``displacement`` = u at the pixel centres, and ``leaf_level`` of
 the fine cells: the mesh), provenance.json. The checkpoint holds the two images and the marked
-region, not the mesh: a resumed run rebuilds it.
+regions, not the mesh: a resumed run rebuilds it.
+
+Two regions are kept: ``region``, the union of the accepted increments' fine regions (the one a
+rebuild starts from), and ``mesh_region``, the one the current mesh was built from, which also
+holds what a refused attempt marked. An attempt on a mesh too coarse at a new tip can mark
+pixels the redone increment does not (a coarse cell's energy is not the fine one's); those stay
+fine until the next rebuild only.
 """
 
 from __future__ import annotations
@@ -66,7 +72,7 @@ class MeshSettings:
     levels: int = 3                     # the coarsest leaf is 2^levels fine cells wide
     pixels_per_fine_cell: int = 1       # 1: the fine cells are the pixels (h/2 of the scene's elements)
     mark_phi: float = 0.2
-    mark_history_phi: float = 0.05
+    mark_history_phi: float = 0.1
     buffer_lc: float = 3.0
     trigger_lc: float = 1.5
     phase_field_tolerance: float = 1e-6
@@ -156,7 +162,7 @@ class AdaptiveRun:
         self.rows: list[dict] = []
         self.history = initial_history(self.scene, self.material, self.grid)
         self.phi = np.zeros(self.grid.shape)
-        self.region = self._fine_region(self.phi, self.history)
+        self.region = self.mesh_region = self._fine_region(self.phi, self.history)
         self.problem = None
 
     # ------------------------------------------------------------------ mesh
@@ -174,7 +180,7 @@ class AdaptiveRun:
     def build_mesh(self, region: np.ndarray) -> None:
         from ifenn.adaptive.problem import AdaptiveMeshProblem
 
-        self.region = region
+        self.mesh_region = region
         tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits)
         self.problem = AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
 
@@ -189,6 +195,7 @@ class AdaptiveRun:
     def _checkpoint(self, increment: int) -> None:
         rows = np.array([[row[c] for c in COLUMNS] for row in self.rows], dtype=float)
         run_files.write_state(self.work_dir / "checkpoint.npz", {"history": self.history, "phase_field": self.phi, "region": self.region,
+                                                                 "mesh_region": self.mesh_region,
                                                                  "rows": rows, "increment": increment, "spec_hash": self.hash})
 
     def _resume(self) -> int:
@@ -199,7 +206,8 @@ class AdaptiveRun:
         if str(data["spec_hash"]) != self.hash:
             log.warning("ignoring checkpoint of another configuration (%s)", path)
             return 0
-        self.history, self.phi, self.region = data["history"], data["phase_field"], data["region"].astype(bool)
+        self.history, self.phi = data["history"], data["phase_field"]
+        self.region, self.mesh_region = data["region"].astype(bool), data["mesh_region"].astype(bool)
         self.rows = [dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()]
         for row in self.rows:
             for key in ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations"):
@@ -218,7 +226,7 @@ class AdaptiveRun:
         started = time.perf_counter()
         self.work_dir.mkdir(parents=True, exist_ok=True)
         first = self._resume() + 1
-        self.build_mesh(self.region)
+        self.build_mesh(self.mesh_region)
         save = set(self.spec["save_fields"])
         bar = progress_bar(total=self.loads.increments, initial=first - 1, desc=self.spec["name"], unit="inc",
                            dynamic_ncols=True) if self.progress else None
@@ -252,6 +260,7 @@ class AdaptiveRun:
         times = dict.fromkeys(("t_displacement_s", "t_phase_field_s", "t_history_s", "t_remesh_s"), 0.0)
         started = time.perf_counter()
         remeshes = pf_iterations = 0
+        pending = self.region          # what this increment's rebuilds ask for (module doc)
         while True:
             problem = self.problem
             problem.set_phase_field(self.phi)
@@ -277,10 +286,12 @@ class AdaptiveRun:
             if not outside or remeshes == settings.max_remesh:
                 break
             t = time.perf_counter()
-            self.build_mesh(self.region | self._fine_region(phi, history))
+            pending = pending | self._fine_region(phi, history)
+            self.build_mesh(pending)
             times["t_remesh_s"] += time.perf_counter() - t
             remeshes += 1
         self.history, self.phi = history, phi
+        self.region = self.region | self._fine_region(phi, history)
         force = problem.reaction_force()
         if not np.isfinite(force):
             raise FloatingPointError(f"non-finite reaction force {force}")
