@@ -2,7 +2,7 @@
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] --out DIR
-  python -m ifenn adaptive --spec SPEC.json --out DIR   (a displacement mesh that follows the crack; one process)
+  python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] --out DIR   (a mesh that follows the crack; one process)
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
   python -m ifenn stage-times [WORKDIR]   what a workflow run spent per stage (its benchmark files)
 """
@@ -32,6 +32,7 @@ def main(argv=None) -> int:
     hybrid.add_argument("--no-progress", action="store_true")
     adaptive = sub.add_parser("adaptive", help="run a FEM run's scene and schedule on a displacement mesh that follows the crack")
     adaptive.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.adaptive_run_spec)")
+    adaptive.add_argument("--model", default=None, help="trained PICNN (a verified IFENN run)")
     adaptive.add_argument("--out", required=True)
     adaptive.add_argument("--no-progress", action="store_true")
     cell = sub.add_parser("cell", help="one stability-sweep cell: FEM, or IFENN continuing --fem-dir; failures are recorded")
@@ -69,7 +70,7 @@ def main(argv=None) -> int:
 
         with open(args.spec) as stream:
             spec = json.load(stream)
-        run_adaptive(spec, args.out, progress=not args.no_progress)
+        run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model)
     elif args.command == "cell":
         from ifenn.studies.stability import run_cell
 

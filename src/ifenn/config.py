@@ -395,6 +395,17 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         elif schedule_increments(config["schedules"][fem_runs[entry["fem_run"]]["schedule"]]) is None:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
                             "run fixed schedules")
+        ifenn_run = entry.get("ifenn_run")
+        if ifenn_run is not None:
+            ifenn_runs = config.get("ifenn_runs", {})
+            if ifenn_run not in ifenn_runs:
+                problems.append(f"config key '{key}.ifenn_run': '{ifenn_run}' is not an IFENN run; allowed: {sorted(ifenn_runs)}")
+            elif ifenn_runs[ifenn_run]["fem_run"] != entry["fem_run"]:
+                problems.append(f"config key '{key}.ifenn_run': '{ifenn_run}' continues FEM run '{ifenn_runs[ifenn_run]['fem_run']}', "
+                                f"not '{entry['fem_run']}'")
+            elif not deep_merge(config["ifenn"]["verification"], ifenn_runs[ifenn_run].get("verification", {}))["enabled"]:
+                problems.append(f"config key '{key}.ifenn_run': '{ifenn_run}' is not verified; on an adaptive mesh the network's "
+                                "answer is always checked (an IFENN run with verification.enabled)")
         merged = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
         for err in validator.iter_errors(merged):
             where = ".".join(map(str, err.absolute_path)) or ""
@@ -419,12 +430,17 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
 
 
 def adaptive_run_spec(config: dict, run: str) -> dict:
-    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers) and the merged
-    ``adaptive_mesh`` settings (:class:`ifenn.adaptive.run.MeshSettings`)."""
+    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers), the merged
+    ``adaptive_mesh`` settings (:class:`ifenn.adaptive.run.MeshSettings`) and, for a verified
+    IFENN run (``ifenn_run``), that run's hybrid settings."""
     if run not in config.get("adaptive_runs", {}):
         raise ConfigError(f"unknown adaptive run '{run}'; allowed: {sorted(config.get('adaptive_runs', {}))}")
     entry = config["adaptive_runs"][run]
     spec = fem_run_spec(config, entry["fem_run"])
+    if entry.get("ifenn_run"):   # the verified IFENN step's settings (predictor, verification, ...)
+        hybrid = ifenn_run_spec(config, entry["ifenn_run"])
+        spec.update({k: v for k, v in hybrid.items() if k not in spec and k not in ("switch_over", "switch_increment")},
+                    ifenn_run=entry["ifenn_run"])
     spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh={**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})})
     return spec
 

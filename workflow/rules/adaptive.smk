@@ -19,13 +19,14 @@ rule adaptive_spec:
 
 rule adaptive:
     input:
-        spec="results/adaptive/{run}/spec.json",
+        unpack(adaptive_inputs),
     output:
         history="results/adaptive/{run}/history.csv",
         fields="results/adaptive/{run}/fields.h5",
         provenance="results/adaptive/{run}/provenance.json",
     params:
         python=PYTHON,
+        model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         out=lambda w, output: os.path.dirname(output.history),
     threads: 1
     resources:
@@ -38,32 +39,16 @@ rule adaptive:
     benchmark:
         "benchmarks/adaptive/{run}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} --out {params.out} > {log} 2>&1"
-
-
-def adaptive_resolution_cases():
-    return {case: {"fem_run": e["fem_run"], "fine_fem_run": e["fine_fem_run"], "fem_dir": f"results/fem/{e['fem_run']}",
-                   "fine_dir": f"results/fem/{e['fine_fem_run']}",
-                   "adaptive_dirs": {run: f"results/adaptive/{run}" for run in e["adaptive_runs"]}}
-            for case, e in config.get("adaptive_resolution", {}).items()}
-
-
-def adaptive_resolution_inputs(wildcards):
-    files = []
-    for where in adaptive_resolution_cases().values():
-        for folder in (where["fem_dir"], where["fine_dir"], *where["adaptive_dirs"].values()):
-            files += [f"{folder}/history.csv", f"{folder}/provenance.json", f"{folder}/spec.json"]
-        files += [f"{folder}/fields.h5" for folder in where["adaptive_dirs"].values()]
-    return files
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} {params.model} --out {params.out} > {log} 2>&1"
 
 
 rule adaptive_resolution:
     input:
         adaptive_resolution_inputs,
     output:
-        table="results/tables/adaptive_resolution.csv",
-        figure="results/figures/adaptive_resolution.png",
-        mesh="results/figures/adaptive_mesh.png",
+        table=report("results/tables/adaptive_resolution.csv", caption="../report/adaptive_resolution.rst", category="Tables"),
+        figure=report("results/figures/adaptive_resolution.png", caption="../report/adaptive_resolution.rst", category="Adaptive meshes"),
+        mesh=report("results/figures/adaptive_mesh.png", caption="../report/adaptive_resolution.rst", category="Adaptive meshes"),
     params:
         cases=adaptive_resolution_cases(),
     log:

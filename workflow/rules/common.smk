@@ -188,3 +188,27 @@ def whole_path_inputs(wildcards):
         paths |= {f"results/ifenn/{run}/spec.json", f"results/fem/{config['ifenn_runs'][run]['fem_run']}/fields.h5",
                   "results/picnn/model.pt"}
     return sorted(paths)
+
+
+def adaptive_inputs(wildcards):
+    """An adaptive run's spec, and the network where it is a verified IFENN run."""
+    inputs = {"spec": f"results/adaptive/{wildcards.run}/spec.json"}
+    if config["adaptive_runs"][wildcards.run].get("ifenn_run"):
+        inputs["model"] = "results/picnn/model.pt"
+    return inputs
+
+
+def adaptive_resolution_cases():
+    return {case: {"fem_run": e["fem_run"], "fine_fem_run": e["fine_fem_run"], "fem_dir": f"results/fem/{e['fem_run']}",
+                   "fine_dir": f"results/fem/{e['fine_fem_run']}",
+                   "adaptive_dirs": {run: f"results/adaptive/{run}" for run in e["adaptive_runs"]}}
+            for case, e in config.get("adaptive_resolution", {}).items()}
+
+
+def adaptive_resolution_inputs(wildcards):
+    files = []
+    for where in adaptive_resolution_cases().values():
+        for folder in (where["fem_dir"], where["fine_dir"], *where["adaptive_dirs"].values()):
+            files += [f"{folder}/history.csv", f"{folder}/provenance.json", f"{folder}/spec.json"]
+        files += [f"{folder}/fields.h5" for folder in where["adaptive_dirs"].values()]
+    return files

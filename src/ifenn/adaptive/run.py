@@ -9,7 +9,10 @@ Per increment (single pass, or staggered to a tolerance as the FEM runs):
 3. phi from the pixel equation (Gc/lc + 2H) phi - Gc lc Lap9(phi) = 2H on the whole image, the
    slits' links cut, solved by the multigrid-preconditioned CG of the verified step
    (:meth:`ifenn.hybrid.verification.PixelEquation.solve_box`) from the last increment's phi, to
-   max |phi - exact pixel solution| <= ``phase_field_tolerance`` (the residual certificate);
+   max |phi - exact pixel solution| <= ``phase_field_tolerance`` (the residual certificate); a
+   verified IFENN run (a spec with ``verification`` enabled) instead takes the network's
+   prediction on the capped H, checks it and corrects it where it fails
+   (:class:`ifenn.hybrid.verification.VerifiedInference`, to its tolerance): the same equation;
 4. predictor-corrector: the crack core (:func:`crack_core`) grown by ``trigger_lc`` must lie in the
    finest leaves; if it does not, the fine region grows by the new core and its buffer, the mesh is
    rebuilt, and the increment
@@ -62,7 +65,10 @@ from ifenn.pixels import PixelGrid, SlitCuts
 log = logging.getLogger(__name__)
 
 COLUMNS = ["increment", "u", "reaction_force", "phi_max", "stagger_iterations", "t_displacement_s", "t_phase_field_s",
-           "t_history_s", "t_remesh_s", "t_increment_s", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations"]
+           "t_history_s", "t_remesh_s", "t_increment_s", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations",
+           "t_network_s", "verify_residual_after"]
+#: integer columns (a checkpoint stores the rows as floats)
+INTEGER_COLUMNS = ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations")
 
 
 @dataclass(frozen=True)
@@ -138,7 +144,7 @@ def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.nda
 class AdaptiveRun:
     """One run on a displacement mesh that follows the crack (module doc)."""
 
-    def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True):
+    def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None):
         from ifenn.hybrid.verification import PixelEquation
 
         self.spec, self.out_dir = spec, Path(out_dir)
@@ -164,6 +170,26 @@ class AdaptiveRun:
         self.phi = np.zeros(self.grid.shape)
         self.region = self.mesh_region = self._fine_region(self.phi, self.history)
         self.problem = None
+        self.verified = None
+        if (spec.get("verification") or {}).get("enabled"):
+            from ifenn.hybrid.runs import make_inference
+
+            if model_path is None:
+                raise ValueError(f"run {spec['name']} is a verified IFENN run: it needs the trained network (model_path)")
+            self.verified = make_inference(spec, model_path, self.grid.h_px, self.grid.shape)
+
+    def _phase_field(self, phi: np.ndarray, history: np.ndarray) -> tuple[np.ndarray, int, float, float]:
+        """The phase field of ``history`` (module doc, step 3): the certified pixel solve from
+        ``phi`` (in place), or the verified IFENN step (network, check, correction) on the capped
+        H. Returns (phi, CG iterations, network seconds, max |r| after)."""
+        if self.verified is None:
+            worst, iterations = self.equation.solve_box(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])),
+                                                        self.settings.phase_field_tolerance)
+            return phi, iterations, 0.0, worst
+        step = self.verified
+        step.start_from(phi)
+        phi = step(np.clip(history, 0.0, self.spec["history_cap"]))
+        return phi.copy(), step.solve_iterations, step.t_network, step.residual_after
 
     # ------------------------------------------------------------------ mesh
     def _fine_region(self, phi: np.ndarray, history: np.ndarray, by_lc: float | None = None) -> np.ndarray:
@@ -210,7 +236,7 @@ class AdaptiveRun:
         self.region, self.mesh_region = data["region"].astype(bool), data["mesh_region"].astype(bool)
         self.rows = [dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()]
         for row in self.rows:
-            for key in ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations"):
+            for key in INTEGER_COLUMNS:
                 row[key] = int(row[key])
         log.info("resuming %s after increment %d", self.spec["name"], int(data["increment"]))
         return int(data["increment"])
@@ -260,6 +286,7 @@ class AdaptiveRun:
         times = dict.fromkeys(("t_displacement_s", "t_phase_field_s", "t_history_s", "t_remesh_s"), 0.0)
         started = time.perf_counter()
         remeshes = pf_iterations = 0
+        network_s = 0.0
         pending = self.region          # what this increment's rebuilds ask for (module doc)
         while True:
             problem = self.problem
@@ -275,9 +302,9 @@ class AdaptiveRun:
                 times["t_history_s"] += time.perf_counter() - t
                 t = time.perf_counter()
                 before = phi.copy()
-                _, iterations = self.equation.solve_box(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])),
-                                                        settings.phase_field_tolerance)
+                phi, iterations, t_network, residual_after = self._phase_field(phi, history)
                 pf_iterations += iterations
+                network_s += t_network
                 problem.set_phase_field(phi)
                 times["t_phase_field_s"] += time.perf_counter() - t
                 if np.abs(phi - before).max() < spec["stagger_tolerance"]:
@@ -297,7 +324,8 @@ class AdaptiveRun:
             raise FloatingPointError(f"non-finite reaction force {force}")
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": float(phi.max()), "stagger_iterations": staggered,
                 **times, "t_increment_s": time.perf_counter() - started, "dofs": problem.n_dofs, "cells": problem.tree.n_cells,
-                "remeshes": remeshes, "outside_fine": int(outside), "phase_field_iterations": pf_iterations}
+                "remeshes": remeshes, "outside_fine": int(outside), "phase_field_iterations": pf_iterations,
+                "t_network_s": network_s, "verify_residual_after": residual_after}
 
     # ------------------------------------------------------------------ outputs
     def _finish(self, wall_s: float) -> None:
@@ -311,19 +339,20 @@ class AdaptiveRun:
         run_files.write_fields(self.out_dir / run_files.FIELDS, attrs, states())
         run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=COLUMNS))
         run_files.write_provenance(self.out_dir, provenance(self.hash, wall_s, run=self.spec["name"], mpi_ranks=1,
-                                                           phase_field_step="pixel-exact", increments=len(self.rows),
+                                                           phase_field_step="verified" if self.verified else "pixel-exact", increments=len(self.rows),
                                                            displacement_mesh="adaptive"))
         for path in self.work_dir.glob("*"):
             path.unlink()
         self.work_dir.rmdir()
 
 
-def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True) -> list[dict]:
-    """Run ``spec`` (a FEM run's spec with an ``adaptive_mesh`` section) on a mesh that follows
-    the crack; one process at a time writes ``out_dir``."""
+def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None) -> list[dict]:
+    """Run ``spec`` (:func:`ifenn.config.adaptive_run_spec`) on a mesh that follows the crack,
+    with the trained network at ``model_path`` for a verified IFENN run; one process at a time
+    writes ``out_dir``."""
     from mpi4py import MPI
 
     if MPI.COMM_WORLD.size > 1:
         raise RuntimeError("adaptive-mesh runs are serial: start them on one process")
     with run_files.exclusive_writer(out_dir, MPI.COMM_WORLD):
-        return AdaptiveRun(spec, out_dir, progress).run()
+        return AdaptiveRun(spec, out_dir, progress, model_path).run()

@@ -2,7 +2,8 @@
 
 A case (config ``adaptive_resolution``) names a FEM run at h, the finer uniform FEM of the same
 specimen and schedule (the converged reference) and adaptive runs of the FEM run
-(:mod:`ifenn.adaptive`). One row per run, FEM at h included (``method`` "fem-uniform"):
+(:mod:`ifenn.adaptive`). One row per run, FEM at h included (``method`` "fem-uniform"; the adaptive
+runs "fem-adaptive", the certified pixel solve, or "verified-adaptive", the verified IFENN step):
 
 - ``peak_error_vs_fine_pct``: (peak |F| / the finer FEM's peak - 1), percent;
 - ``post_peak_rms_vs_fine_pct``: RMS of |F| - |F_fine| (the finer curve interpolated at the run's
@@ -45,12 +46,14 @@ def _post_peak(u: np.ndarray, force: np.ndarray, fine: tuple[np.ndarray, np.ndar
 
 
 def resolution_rows(fem: pd.DataFrame, fine: pd.DataFrame, adaptive: dict[str, pd.DataFrame], fine_dofs: int, fem_dofs: int,
-                    wall: dict[str, float]) -> list[dict]:
-    """Rows of one case (module doc); ``wall``: run -> seconds, with "fem" for FEM at h."""
+                    wall: dict[str, float], methods: dict[str, str] | None = None) -> list[dict]:
+    """Rows of one case (module doc); ``wall``: run -> seconds, with "fem" for FEM at h;
+    ``methods``: adaptive run -> its method (default "fem-adaptive")."""
+    methods = methods or {}
     reference = (fine.u.to_numpy(), np.abs(fine.reaction_force.to_numpy()))
     peak_fine = reference[1].max()
     rows = []
-    runs = {"": (fem, "fem-uniform"), **{name: (history, "fem-adaptive") for name, history in adaptive.items()}}
+    runs = {"": (fem, "fem-uniform"), **{name: (history, methods.get(name, "fem-adaptive")) for name, history in adaptive.items()}}
     for name, (history, method) in runs.items():
         u, force = history.u.to_numpy(), np.abs(history.reaction_force.to_numpy())
         dofs = history.dofs.to_numpy() if "dofs" in history else np.full(len(history), fem_dofs)
@@ -76,10 +79,12 @@ def adaptive_resolution_table(cases: dict[str, dict]) -> pd.DataFrame:
     for case, where in cases.items():
         fine_scene, fem_scene = read_spec(where["fine_dir"])["scene"], read_spec(where["fem_dir"])["scene"]
         adaptive = {run: read_history(path) for run, path in where["adaptive_dirs"].items()}
+        methods = {run: "verified-adaptive" if read_spec(path).get("ifenn_run") else "fem-adaptive"
+                   for run, path in where["adaptive_dirs"].items()}
         wall = {"fem": read_provenance(where["fem_dir"])["wall_time_s"],
                 **{run: read_provenance(path)["wall_time_s"] for run, path in where["adaptive_dirs"].items()}}
         for row in resolution_rows(read_history(where["fem_dir"]), read_history(where["fine_dir"]), adaptive,
-                                   uniform_dofs(fine_scene), uniform_dofs(fem_scene), wall):
+                                   uniform_dofs(fine_scene), uniform_dofs(fem_scene), wall, methods):
             rows.append({"case": case, "fem_run": where["fem_run"], "fine_fem_run": where["fine_fem_run"],
                          **{**row, "run": row["run"] or where["fem_run"]}})
     return pd.DataFrame(rows)
