@@ -176,3 +176,29 @@ def test_killed_adaptive_run_resumes_to_the_same_history(adaptive_and_fine, tmp_
     resumed = pd.DataFrame(run_adaptive(spec, tmp_path / "run", progress=False))
     np.testing.assert_allclose(resumed.reaction_force, adaptive.reaction_force[:14], rtol=1e-6)
     np.testing.assert_array_equal(resumed.dofs, adaptive.dofs[:14])
+
+
+def test_adaptive_run_under_shear_keeps_the_slit_open(quick_config, tmp_path_factory):
+    """The shear-loaded single-edge notch (mixed mode; the slit's faces slide and the damage is
+    not symmetric about it): the adaptive run against FEM on twice the elements, nearer than FEM
+    at h (measured: peak 0.04 % vs 0.27 %, post-peak RMS 0.60 % vs 1.24 %). A slit whose faces were
+    tied (no twins) or a stencil that saw through it would stiffen the specimen by far more."""
+    from conftest import quick_fem_run
+
+    from ifenn.adaptive.run import run_adaptive
+    from ifenn.config import fem_run_spec
+
+    spec = copy.deepcopy(fem_run_spec(quick_config, "snt-shear"))
+    spec.update(name="snt-shear-adaptive", adaptive_mesh={"levels": 3})
+    adaptive = pd.DataFrame(run_adaptive(spec, tmp_path_factory.mktemp("shear") / "run", progress=False))
+    *_, coarse = quick_fem_run(quick_config, tmp_path_factory, "snt-shear", "shear_h")
+    *_, fine = quick_fem_run(quick_config, tmp_path_factory, "snt-shear-fine", "shear_fine")
+
+    def errors(history):
+        f, f_fine = history.reaction_force.abs().to_numpy(), fine.reaction_force.abs().to_numpy()
+        peak, k = f_fine.max(), int(np.argmax(f_fine))
+        return abs(f.max() / peak - 1), np.sqrt(np.mean((f[k + 1:] - f_fine[k + 1:]) ** 2)) / peak
+
+    (peak_a, rms_a), (peak_h, rms_h) = errors(adaptive), errors(coarse)
+    assert peak_a < 5e-3 and peak_a < peak_h and rms_a < 0.8 * rms_h
+    assert (adaptive.outside_fine == 0).all()
