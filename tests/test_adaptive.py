@@ -63,6 +63,14 @@ def test_slit_nodes_are_doubled_for_the_upper_side_and_the_tip_is_shared():
     assert shared == set()     # the two faces share no node left of the tip
     # leaves face each other across the slit at the same level
     np.testing.assert_array_equal(tree.leaf_level[15, :12], tree.leaf_level[16, :12])
+    # a hanging node beside the slit is tied to its own face: above it, to the twins; below, to the
+    # original nodes (tied across, it would glue the faces where the mesh is graded)
+    y = tree.node_ij[tree.hanging, 1]
+    twins = np.arange(tree.n_grid_nodes, tree.n_nodes)
+    assert (y > 16).any() and (y < 16).any()
+    assert not np.isin(tree.masters[y > 16], tree.twin_of).any()
+    assert not np.isin(tree.masters[y < 16], twins).any()
+    assert np.isin(tree.masters[y > 16], twins).any()
 
 
 # ------------------------------------------------------------------ the mesh problem

@@ -119,6 +119,11 @@ class Quadtree:
             block = self.cells[side]
             swap = lookup[block]
             self.cells[side] = np.where(swap >= 0, swap, block)
+            # a hanging node on the twins' side is tied to the twins, not to the other face's nodes
+            ij = self.node_ij[self.hanging]
+            upper = ij[:, 1 - slit.axis] > slit.line
+            tied = self.masters[upper]
+            self.masters[upper] = np.where(lookup[tied] >= 0, lookup[tied], tied)
         self.twin_of = np.concatenate(twins_of) if twins_of else np.empty(0, dtype=np.int64)
 
     @property
