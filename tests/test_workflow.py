@@ -223,9 +223,11 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
     judged at the paper's scale (README)."""
     results = quick_workflow / "results"
     table = pd.read_csv(results / "tables" / "adaptive_resolution.csv").set_index("run")
-    assert set(table.method) == {"fem-uniform", "fem-adaptive", "verified-adaptive"}
+    assert set(table.method) == {"fem-uniform", "fem-adaptive", "verified-adaptive"} and set(table.case) == {"snt1-II", "snt-shear"}
     uniform, exact, verified = table.loc["snt1-II"], table.loc["snt1-II-adaptive"], table.loc["snt1-II-adaptive-verified"]
-    for row in (exact, verified):
+    shear, shear_uniform = table.loc["snt-shear-adaptive"], table.loc["snt-shear"]
+    assert shear.post_peak_rms_vs_fine_pct < shear_uniform.post_peak_rms_vs_fine_pct
+    for row in (exact, verified, shear):
         assert abs(row.peak_error_vs_fine_pct) < 0.5 and row.post_peak_rms_vs_fine_pct < 1.0
         assert row.post_peak_rms_vs_fine_pct < uniform.post_peak_rms_vs_fine_pct
         assert row.increments_outside_fine == 0 and row.remeshes > 0
