@@ -210,3 +210,25 @@ def test_adaptive_run_under_shear_keeps_the_slit_open(quick_config, tmp_path_fac
     (peak_a, rms_a), (peak_h, rms_h) = errors(adaptive), errors(coarse)
     assert peak_a < 5e-3 and peak_a < peak_h and rms_a < 0.8 * rms_h
     assert (adaptive.outside_fine == 0).all()
+
+
+def test_displacement_transfer_between_meshes_is_exact_for_bilinear_fields():
+    """The initial guess after a rebuild: a field linear in x and y on one graded mesh with a slit
+    is carried exactly to the free nodes of another (twins included)."""
+    from ifenn.adaptive.problem import transfer_displacement
+
+    slit = FineSlit(axis=0, line=16, start=0, stop=12)
+    first = _problem(_graded_tree([slit]))
+    target = np.zeros((32, 32), dtype=int)
+    target[20:26, 4:9] = 3
+    second = _problem(build_quadtree(target, 3, (0.0, 0.0), 1 / 32, [slit]))
+
+    def field(problem):
+        x = problem.tree.points
+        return np.column_stack([0.3 * x[:, 0] - 0.1 * x[:, 1], 0.2 * x[:, 0] + 0.5 * x[:, 1]])
+
+    values = field(first)[first.free_nodes]
+    first.u_reduced.setArray(values.ravel())
+    first.P.mult(first.u_reduced, first.displacement.vector)
+    transfer_displacement(first, second)
+    np.testing.assert_allclose(second.u_reduced.array.reshape(-1, 2), field(second)[second.free_nodes], atol=1e-14)

@@ -264,3 +264,37 @@ class AdaptiveMeshProblem:
     def n_dofs(self) -> int:
         """Displacement unknowns (free dofs)."""
         return self.n_free_dofs
+
+
+def transfer_displacement(old: AdaptiveMeshProblem, new: AdaptiveMeshProblem) -> None:
+    """Start ``new``'s displacement solve from ``old``'s solution: Q1 interpolation of the old
+    field at the new free nodes (every node lies on the same fine lattice). A node on a slit takes
+    its own face's value (twins from the cells above or right of the slit, the others from below
+    or left). Only the initial guess of the Krylov solve: the solution is the new mesh's own."""
+    t_old, t_new = old.tree, new.tree
+    u_node = np.zeros((t_old.n_nodes, 2))
+    u_node[old.node_of_block] = old.displacement.x.array.reshape(-1, 2)
+    cell_of = np.empty((t_old.ny, t_old.nx), dtype=np.int64)
+    for size in np.unique(t_old.cell_size):
+        cells = np.flatnonzero(t_old.cell_size == size)
+        d = np.arange(size)
+        rows = t_old.cell_origin[cells, 1, None, None] + d[None, :, None]
+        cols = t_old.cell_origin[cells, 0, None, None] + d[None, None, :]
+        cell_of[rows, cols] = cells[:, None, None]
+    nodes = new.free_nodes
+    ij = t_new.node_ij[np.where(nodes < t_new.n_grid_nodes, nodes, t_new.twin_of[np.maximum(nodes - t_new.n_grid_nodes, 0)])]
+    cx, cy = np.minimum(ij[:, 0], t_old.nx - 1), np.minimum(ij[:, 1], t_old.ny - 1)
+    twin = nodes >= t_new.n_grid_nodes
+    for slit in t_new.slits:   # the other face's nodes look into the cell below / left of the slit
+        along, across = (ij[:, 0], ij[:, 1]) if slit.axis == 0 else (ij[:, 1], ij[:, 0])
+        on = (across == slit.line) & (along >= slit.start) & (along <= slit.stop) & ~twin & (across > 0)
+        if slit.axis == 0:
+            cy = np.where(on, ij[:, 1] - 1, cy)
+        else:
+            cx = np.where(on, ij[:, 0] - 1, cx)
+    cell = cell_of[cy, cx]
+    xi = (ij[:, 0] - t_old.cell_origin[cell, 0]) / t_old.cell_size[cell]
+    eta = (ij[:, 1] - t_old.cell_origin[cell, 1]) / t_old.cell_size[cell]
+    weights = np.column_stack([(1 - xi) * (1 - eta), xi * (1 - eta), (1 - xi) * eta, xi * eta])
+    values = np.einsum("nk,nkc->nc", weights, u_node[t_old.cells[cell]])
+    new.u_reduced.setArray(values.ravel())

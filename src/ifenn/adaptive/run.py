@@ -74,9 +74,10 @@ log = logging.getLogger(__name__)
 
 COLUMNS = ["increment", "u", "reaction_force", "phi_max", "stagger_iterations", "t_displacement_s", "t_phase_field_s",
            "t_history_s", "t_remesh_s", "t_increment_s", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations",
-           "t_network_s", "verify_residual_after"]
+           "t_network_s", "verify_residual_after", "displacement_iterations"]
 #: integer columns (a checkpoint stores the rows as floats)
-INTEGER_COLUMNS = ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations")
+INTEGER_COLUMNS = ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations",
+                   "displacement_iterations")
 
 
 @dataclass(frozen=True)
@@ -213,11 +214,13 @@ class AdaptiveRun:
         return np.where(fine, self.levels, 0)
 
     def build_mesh(self, region: np.ndarray) -> None:
-        from ifenn.adaptive.problem import AdaptiveMeshProblem
+        from ifenn.adaptive.problem import AdaptiveMeshProblem, transfer_displacement
 
         self.mesh_region = region
         tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits)
-        self.problem = AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
+        old, self.problem = self.problem, AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
+        if old is not None:   # the solve on the new mesh starts from the old solution
+            transfer_displacement(old, self.problem)
 
     def inside_fine(self, marked: np.ndarray) -> bool:
         """Whether every marked pixel lies in a finest leaf."""
@@ -294,7 +297,7 @@ class AdaptiveRun:
         settings, spec = self.settings, self.spec
         times = dict.fromkeys(("t_displacement_s", "t_phase_field_s", "t_history_s", "t_remesh_s"), 0.0)
         started = time.perf_counter()
-        remeshes = pf_iterations = 0
+        remeshes = pf_iterations = u_iterations = 0
         network_s = 0.0
         pending = self.region          # what this increment's rebuilds ask for (module doc)
         while True:
@@ -304,7 +307,7 @@ class AdaptiveRun:
             for iteration in range(1, spec["stagger_max_iterations"] + 1):
                 staggered = iteration
                 t = time.perf_counter()
-                problem.solve_displacement(u)
+                u_iterations += problem.solve_displacement(u)
                 times["t_displacement_s"] += time.perf_counter() - t
                 t = time.perf_counter()
                 energy = problem.tensile_energy()
@@ -335,7 +338,7 @@ class AdaptiveRun:
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": float(phi.max()), "stagger_iterations": staggered,
                 **times, "t_increment_s": time.perf_counter() - started, "dofs": problem.n_dofs, "cells": problem.tree.n_cells,
                 "remeshes": remeshes, "outside_fine": int(outside), "phase_field_iterations": pf_iterations,
-                "t_network_s": network_s, "verify_residual_after": residual_after}
+                "t_network_s": network_s, "verify_residual_after": residual_after, "displacement_iterations": u_iterations}
 
     # ------------------------------------------------------------------ outputs
     def _finish(self, wall_s: float) -> None:
