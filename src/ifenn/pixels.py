@@ -109,6 +109,8 @@ class SlitCuts:
     rows: np.ndarray = field(repr=False)
     cols: np.ndarray = field(repr=False)
     weights: np.ndarray = field(repr=False)
+    #: (grid, slits, domain) of :meth:`from_slits`: what :meth:`coarse_links` redraws at coarser spacings
+    source: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def none(cls, shape: tuple[int, int]) -> SlitCuts:
@@ -161,7 +163,25 @@ class SlitCuts:
             rows.append((iy * nx + ix)[cut])
             cols.append((jy * nx + jx)[cut])
             weights.append(np.full(int(cut.sum()), weight))
-        return cls(grid.shape, np.concatenate(rows).astype(np.int64), np.concatenate(cols).astype(np.int64), np.concatenate(weights))
+        return cls(grid.shape, np.concatenate(rows).astype(np.int64), np.concatenate(cols).astype(np.int64), np.concatenate(weights),
+                   (grid, tuple(slits), domain))
+
+    def coarse_links(self, box: Box, level: int, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The cut links of a multigrid level over ``box``: cells of 2^level x 2^level pixels from
+        the box's corner (``shape`` cells), the slits redrawn at that spacing; links to cells
+        beyond the box are not cut (zero padding: the level's operator stays symmetric). Where a
+        slit's line runs through a level's cells (both faces in one cell) nothing is cut there:
+        re-discretised levels cannot split a cell. Empty where the cuts were not drawn from slits
+        (a crop, a batch)."""
+        if self.source is None or not self:
+            empty = np.zeros(0, dtype=np.int64)
+            return empty, empty, np.zeros(0)
+        grid, slits, domain = self.source
+        scale = 2**level
+        coarse = PixelGrid(grid.x0 + box[1].start * grid.h_px, grid.y0 + box[0].start * grid.h_px, grid.h_px * scale,
+                           int(shape[1]), int(shape[0]))
+        cuts = SlitCuts.from_slits(coarse, list(slits), "zeros", domain)
+        return cuts.rows, cuts.cols, cuts.weights
 
     def __bool__(self) -> bool:
         return self.rows.size > 0

@@ -36,7 +36,7 @@ down by that factor: 6 lc at lc/h_px = 12) and grouped into boxes (the connected
 with the values around it as Dirichlet data (the image's own padding where the box meets
 the image edge) by conjugate gradients preconditioned with one multigrid V-cycle (compiled:
 ``ifenn_pixel_mg_pcg`` in ``orbit_kernel.cpp``; cell-centred, Jacobi smoothing, bilinear
-transfers, coarse operators re-discretised), for the correction of the candidate, until
+transfers, coarse operators re-discretised with the slits' links cut at each level's spacing), for the correction of the candidate, until
 max |r| <= ``solve_fraction`` x tolerance inside the box. Without the compiled kernel the
 fallback is CG preconditioned with the constant-coefficient operator's fast sine transform.
 The V-cycle reduces the residual about tenfold per iteration whatever the box size and
@@ -125,6 +125,7 @@ class PixelEquation:
             raise ValueError(f"pixel equation padding must be 'replicate' or 'zeros', got {padding!r}")
         self.Gc, self.lc, self.h_px, self.padding = Gc, lc, h_px, padding
         self.cuts = cuts if cuts else None
+        self._coarse_cache: dict = {}   # box -> the coarse levels' cut links (_level_links)
         self.diffusion = Gc * lc / h_px**2
         self.reaction0 = Gc / lc
 
@@ -210,6 +211,29 @@ class PixelEquation:
         symbol = reaction.min() - self.diffusion * (0.5 * (s_x + s_y) + 0.25 * s_x * s_y - 3.0)
         return lambda r: scipy.fft.dstn(scipy.fft.dstn(r, type=1, norm="ortho") / symbol, type=1, norm="ortho")
 
+    def _level_links(self, box: Box, links) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The cut links of every multigrid level of ``box`` for the compiled V-cycle: per level
+        the count, then rows / cols / weights one level after another (the finest: ``links``, the
+        box's own; the coarser: the slits redrawn at each level's spacing, cached per box). The
+        levels halve as the kernel's (``mg_work``): while both sides exceed 4, at most 16."""
+        if links is None:
+            return np.zeros(0, np.intc), np.zeros(0, np.intc), np.zeros(0, np.intc), np.zeros(0)
+        key = (box[0].start, box[0].stop, box[1].start, box[1].stop)
+        cache = self._coarse_cache
+        if key not in cache:
+            shape, levels = (box[0].stop - box[0].start, box[1].stop - box[1].start), []
+            while shape[0] > 4 and shape[1] > 4 and len(levels) < 15:
+                shape = ((shape[0] + 1) // 2, (shape[1] + 1) // 2)
+                levels.append(self.cuts.coarse_links(box, len(levels) + 1, shape))
+            if len(cache) > 64:
+                cache.clear()
+            cache[key] = levels
+        parts = [links, *cache[key]]
+        counts = np.array([len(p[0]) for p in parts], dtype=np.intc)
+        return (counts, np.ascontiguousarray(np.concatenate([p[0] for p in parts]), dtype=np.intc),
+                np.ascontiguousarray(np.concatenate([p[1] for p in parts]), dtype=np.intc),
+                np.ascontiguousarray(np.concatenate([p[2] for p in parts]), dtype=np.float64))
+
     def solve_box(self, phi: np.ndarray, history: np.ndarray, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
         """Solve the pixel equation on ``box`` in place in ``phi`` (the values around the box
         fixed), to max |r| <= ``target`` inside it, by conjugate gradients preconditioned with a
@@ -229,11 +253,11 @@ class PixelEquation:
             delta = np.empty(centre.shape)
             replicate = np.array(edges if self.padding == "replicate" else (False,) * 4, dtype=np.intc)
             worst = np.zeros(1)
-            rows, cols, weights = (np.ascontiguousarray(links[0], dtype=np.intc), np.ascontiguousarray(links[1], dtype=np.intc),
-                                   np.ascontiguousarray(links[2], dtype=np.float64)) if links is not None else (np.zeros(0, np.intc),) * 2 + (np.zeros(0),)
+            counts, rows, cols, weights = self._level_links(box, links)
             iterations = lib.ifenn_pixel_mg_pcg(residual.ctypes.data, np.ascontiguousarray(reaction).ctypes.data, delta.ctypes.data,
                                                 delta.shape[0], delta.shape[1], self.diffusion, replicate.ctypes.data, target, maxiter,
-                                                worst.ctypes.data, rows.size, rows.ctypes.data, cols.ctypes.data, weights.ctypes.data)
+                                                worst.ctypes.data, counts.size, counts.ctypes.data, rows.ctypes.data, cols.ctypes.data,
+                                                weights.ctypes.data)
             if iterations < 0:
                 raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                    f"(reached {worst[0]:g})")

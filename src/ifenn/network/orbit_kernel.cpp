@@ -239,7 +239,8 @@ namespace {
 // and after; for this 9-point stencil the high-frequency eigenvalues of D^-1 A lie in [2/3, 4/3],
 // so plain Jacobi damps them by 1/3 or more), bilinear prolongation, restriction = its transpose
 // / 4 (the preconditioner is symmetric positive definite, as CG needs), coarse operators
-// re-discretised (D / 4 per level, a averaged over the children), Jacobi sweeps on the coarsest.
+// re-discretised (D / 4 per level, a averaged over the children, the slits' links at that level's
+// spacing cut), Jacobi sweeps on the coarsest.
 // the V-cycle is a preconditioner: single precision halves its memory traffic (the CG around
 // it, the residuals and the certificate stay in double)
 using real = float;
@@ -257,7 +258,7 @@ struct MGLevel {
     std::vector<int> row_c, col_c;
     std::vector<real> row_w, col_w;
     std::vector<real> tmp;           // coarse rows x fine columns
-    // the finest level's slit cuts (links i -> j, flat in the level; j = -1 beyond the box): its
+    // the level's slit cuts (links i -> j, flat in the level; j = -1 beyond the box): its
     // smoother and residual use the cut operator; set for the duration of one call
     int n_cut = 0;
     const int* cut_rows = nullptr;
@@ -504,9 +505,10 @@ void mg_coefficients(MGWork& work, const double* a, double D) {
     }
     for (MGLevel& L : levels)
         for (size_t c = 0; c < L.a.size(); ++c) L.diag[c] = L.a[c] + real(3) * L.D, L.inv[c] = real(1) / L.diag[c];
-    MGLevel& top = levels[0];  // the cut links leave the finest level's diagonal
-    for (int k = 0; k < top.n_cut; ++k) top.diag[top.cut_rows[k]] -= real(top.D * top.cut_w[k]);
-    for (int k = 0; k < top.n_cut; ++k) top.inv[top.cut_rows[k]] = real(1) / top.diag[top.cut_rows[k]];
+    for (MGLevel& L : levels) {  // the cut links leave each level's diagonal
+        for (int k = 0; k < L.n_cut; ++k) L.diag[L.cut_rows[k]] -= real(L.D * L.cut_w[k]);
+        for (int k = 0; k < L.n_cut; ++k) L.inv[L.cut_rows[k]] = real(1) / L.diag[L.cut_rows[k]];
+    }
 }
 
 }  // namespace
@@ -557,20 +559,30 @@ void ifenn_pixel_residual(const double* phi, const double* history, double* out,
 
 // Slits (ifenn.pixels.SlitCuts): n_cut directed links i -> j of the box (flat indices; j = -1:
 // beyond the box, where delta is 0) that carry no flux: (A x)_i += D w (x_j - x_i) for each. The
-// CG's operator and so its residual and certificate are the cut ones; so are the finest level's
-// Jacobi smoother and residual in the V-cycle (diagonal and links), while the coarse levels stay
-// uncut (a symmetric positive definite preconditioner all the same).
+// CG's operator and so its residual and certificate are the cut ones; so are the V-cycle's
+// Jacobi smoothers and residuals (diagonal and links) on every level: level_cuts[k] links of level
+// k, one after another in cut_rows / cut_cols / cut_w (level 0 first: the finest, the CG's; the
+// coarse levels' from the slits at their own spacing, so a cut stays a cut there). Levels beyond
+// n_levels have none (a symmetric positive definite preconditioner all the same).
 int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n, int m, double D, const int* replicate,
-                       double target, int maxiter, double* worst, int n_cut, const int* cut_rows, const int* cut_cols,
-                       const double* cut_w) {
+                       double target, int maxiter, double* worst, int n_levels, const int* level_cuts, const int* cut_rows,
+                       const int* cut_cols, const double* cut_w) {
     MGWork& work = mg_work(n, m, replicate);
     std::vector<MGLevel>& levels = work.levels;
     MGLevel& top = levels[0];
-    top.n_cut = n_cut, top.cut_rows = cut_rows, top.cut_cols = cut_cols, top.cut_w = cut_w;
+    int64_t offset = 0;
+    for (int k = 0; k < n_levels && k < static_cast<int>(levels.size()); ++k) {
+        MGLevel& L = levels[k];
+        L.n_cut = level_cuts[k], L.cut_rows = cut_rows + offset, L.cut_cols = cut_cols + offset, L.cut_w = cut_w + offset;
+        offset += level_cuts[k];
+    }
+    const int n_cut = top.n_cut;
     struct Unset {  // the work is cached per shape: forget this call's cuts on every return
-        MGLevel& L;
-        ~Unset() { L.n_cut = 0, L.cut_rows = L.cut_cols = nullptr, L.cut_w = nullptr; }
-    } unset{top};
+        std::vector<MGLevel>& levels;
+        ~Unset() {
+            for (MGLevel& L : levels) L.n_cut = 0, L.cut_rows = L.cut_cols = nullptr, L.cut_w = nullptr;
+        }
+    } unset{levels};
     mg_coefficients(work, a, D);
     const int64_t w = m + 2;
     double *r = work.r.data(), *z = work.z.data(), *q = work.q.data(), *p = work.p.data();
@@ -663,6 +675,6 @@ int ifenn_pixel_mg_pcg(const double* rhs, const double* a, double* delta, int n,
     return -1;
 }
 
-int ifenn_kernel_version() { return 7; }
+int ifenn_kernel_version() { return 8; }
 
 }

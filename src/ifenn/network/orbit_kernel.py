@@ -26,7 +26,7 @@ from pathlib import Path
 
 SOURCE = Path(__file__).with_name("orbit_kernel.cpp")
 FLAGS = ("-O3", "-march=native", "-std=c++17", "-shared", "-fPIC")
-VERSION = 7
+VERSION = 8
 #: floats after the last pixel of every buffer handed to the kernel (a chunk reads past a run's end)
 SLACK = 64
 ACTIVATIONS = {"none": 0, "tanh": 1, "sigmoid": 2}
@@ -85,7 +85,7 @@ def load() -> ctypes.CDLL | None:
                                          ctypes.c_double, ctypes.c_double, integer, integer]
     lib.ifenn_pixel_residual.restype = None
     lib.ifenn_pixel_mg_pcg.argtypes = [pointer, pointer, pointer, integer, integer, ctypes.c_double, pointer, ctypes.c_double, integer,
-                                       pointer, integer, pointer, pointer, pointer]
+                                       pointer, integer, pointer, pointer, pointer, pointer]
     lib.ifenn_pixel_mg_pcg.restype = integer
     lib.ifenn_kernel_version.restype = integer
     if lib.ifenn_kernel_version() != VERSION:
