@@ -592,7 +592,7 @@ def adaptive_resolution_figure(curves: dict, table, path) -> None:
             history = curves[case][label]
             u, force = history.u.to_numpy(), history.reaction_force.abs().to_numpy()
             style = [dict(color="k", lw=1.2, ls="--"), dict(color="k", lw=1.6, ls=":")][j] if j < 2 else dict(color=next(colours), lw=1.2)
-            run = label.split(" ", 2)[1]
+            run = label.split(" ", 1)[1]   # "FEM <run>", "adaptive <run>"
             if j != 1:
                 r = numbers.loc[run]
                 label = (f"{label}: peak {r.peak_error_vs_fine_pct:+.2f} %, post-peak RMS {r.post_peak_rms_vs_fine_pct:.2f} %, "
