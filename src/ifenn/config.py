@@ -392,7 +392,7 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         key = f"adaptive_runs.{name}"
         if entry["fem_run"] not in fem_runs:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' is not a FEM run; allowed: {sorted(fem_runs)}")
-        elif schedule_increments(config["schedules"][fem_runs[entry["fem_run"]]["schedule"]]) is None:
+        elif (schedule := config["schedules"].get(fem_runs[entry["fem_run"]]["schedule"])) is not None and schedule_increments(schedule) is None:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
                             "run fixed schedules")
         ifenn_run = entry.get("ifenn_run")

@@ -94,6 +94,7 @@ class AdaptiveMeshProblem:
         self.ksp = PETSc.KSP().create(self.comm)
         configure_ksp(self.ksp, "displacement_", displacement_options)
         self._displacement_options = dict(displacement_options)
+        self._nullspace = self._near_nullspace()
         self.u_reduced = PETSc.Vec().createSeq(self.n_free_dofs)
         self.rhs = PETSc.Vec().createSeq(self.n_free_dofs)
         self._tensile = physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"])
@@ -231,8 +232,6 @@ class AdaptiveMeshProblem:
         fem_petsc.assemble_matrix(self.K, self.stiffness_form)
         self.K.assemble()
         self.K_reduced = self.K.PtAP(self.P, result=self.K_reduced)
-        if not hasattr(self, "_nullspace"):
-            self._nullspace = self._near_nullspace()
         self.K_reduced.setNearNullSpace(self._nullspace)
         prescribed = self.u_reduced.duplicate()
         prescribed.set(0.0)
