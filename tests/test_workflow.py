@@ -239,3 +239,7 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
     assert abs(exact.peak_force - verified.peak_force) < 1e-3 * exact.peak_force
     for figure in ("adaptive_resolution.png", "adaptive_mesh.png"):
         assert (results / "figures" / figure).stat().st_size > 10_000
+    points = pd.read_csv(results / "tables" / "speed_accuracy.csv")   # the adaptive runs are points of the chart
+    adaptive = points[points.method == "adaptive"]
+    assert len(adaptive) == 4 and adaptive.variant.str.startswith("adaptive mesh").all()
+    assert (adaptive.displacement_solves >= adaptive.increments).all()

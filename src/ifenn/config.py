@@ -288,7 +288,7 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
             problems.append(f"config key 'figures.comparisons.{run}.verified': '{other}' continues FEM run "
                             f"'{runs[other]['fem_run']}', not '{runs[run]['fem_run']}'")
     for scene, setup in config.get("speed_accuracy", {}).items():
-        for key, pool in (("reference", "fem_runs"), ("fem", "fem_runs"), ("ifenn", "ifenn_runs")):
+        for key, pool in (("reference", "fem_runs"), ("fem", "fem_runs"), ("ifenn", "ifenn_runs"), ("adaptive", "adaptive_runs")):
             names = [setup[key]] if key == "reference" else setup.get(key, [])
             for run in names:
                 if run not in config.get(pool, {}):

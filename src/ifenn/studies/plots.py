@@ -354,7 +354,7 @@ def stability_map_figure(table, path) -> None:
 def speed_accuracy_figure(table, path, benchmark=None) -> None:
     """Per scene (rows): force-curve error against wall time of the whole run (left) and of
     the propagation stage (right), log-log, FEM circles, IFENN squares (whole-path IFENN
-    diamonds), the Pareto front
+    diamonds), adaptive-mesh runs triangles, the Pareto front
     of each panel as a line; the reference run is drawn at the bottom edge. ``benchmark``
     (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
     scenes = list(dict.fromkeys(table.scene))
@@ -368,7 +368,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
             for _, r in rows.iterrows():
                 error = floor if r.is_reference else r.force_l2_rel_error
                 colour = colours[r.schedule]
-                marker = "o" if r.method == "fem" else ("D" if r.variant.endswith("whole path") else "s")
+                marker = {"fem": "o", "adaptive": "^"}.get(r.method, "D" if r.variant.endswith("whole path") else "s")
                 ax.scatter(r[column], 100 * error, marker=marker, s=60,
                            facecolor="white" if r.converged else colour,
                            edgecolor="k" if r[f"pareto_{column}"] else colour, linewidth=1.8, zorder=3)
@@ -385,6 +385,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
         handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
                    plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
                    plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path (from the first increment)"),
+                   plt.Line2D([], [], marker="^", ls="", color="grey", label="adaptive mesh (FEM or verified IFENN)"),
                    plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
                    plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
