@@ -372,12 +372,19 @@ def _reference_convergence_problems(config: dict) -> list[str]:
         if not all(f > c for f, c in zip(scene_f["elements"], scene_c["elements"], strict=False)):
             problems.append(f"config key '{key}.fine_fem_run': scene '{fine['scene']}' has {scene_f['elements']} elements, "
                             f"not more than '{coarse['scene']}' ({scene_c['elements']}) in both directions")
-        for k, run in enumerate(entry["ifenn_runs"]):
-            if run not in ifenn_runs:
-                problems.append(f"config key '{key}.ifenn_runs[{k}]': '{run}' is not an IFENN run; allowed: {sorted(ifenn_runs)}")
-            elif ifenn_runs[run]["fem_run"] != entry["fem_run"]:
-                problems.append(f"config key '{key}.ifenn_runs[{k}]': '{run}' continues FEM run '{ifenn_runs[run]['fem_run']}', "
-                                f"not '{entry['fem_run']}'")
+        problems += _runs_of_fem_run(f"{key}.ifenn_runs", entry["ifenn_runs"], ifenn_runs, "an IFENN run", "continues",
+                                     entry["fem_run"])
+    return problems
+
+
+def _runs_of_fem_run(key: str, names: list, pool: dict, kind: str, verb: str, fem_run: str) -> list[str]:
+    """Each of ``names`` (config key ``key``) must be in ``pool`` and run ``fem_run``."""
+    problems = []
+    for k, run in enumerate(names):
+        if run not in pool:
+            problems.append(f"config key '{key}[{k}]': '{run}' is not {kind}; allowed: {sorted(pool)}")
+        elif pool[run]["fem_run"] != fem_run:
+            problems.append(f"config key '{key}[{k}]': '{run}' {verb} FEM run '{pool[run]['fem_run']}', not '{fem_run}'")
     return problems
 
 
@@ -420,12 +427,8 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         for field in ("fem_run", "fine_fem_run"):
             if entry[field] not in fem_runs:
                 problems.append(f"config key '{key}.{field}': '{entry[field]}' is not a FEM run; allowed: {sorted(fem_runs)}")
-        for k, run in enumerate(entry["adaptive_runs"]):
-            if run not in adaptive_runs:
-                problems.append(f"config key '{key}.adaptive_runs[{k}]': '{run}' is not an adaptive run; allowed: {sorted(adaptive_runs)}")
-            elif adaptive_runs[run]["fem_run"] != entry["fem_run"]:
-                problems.append(f"config key '{key}.adaptive_runs[{k}]': '{run}' runs FEM run '{adaptive_runs[run]['fem_run']}', "
-                                f"not '{entry['fem_run']}'")
+        problems += _runs_of_fem_run(f"{key}.adaptive_runs", entry["adaptive_runs"], adaptive_runs, "an adaptive run", "runs",
+                                     entry["fem_run"])
     return problems
 
 
