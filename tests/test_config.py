@@ -47,6 +47,9 @@ def assert_refused(paper_config, mutate, expected):
         (lambda c: c["schedules"]["A"]["adaptive"].update(step_min=1.0e-3), ["schedules.A.adaptive", "step_min <= step_initial"]),
         (lambda c: c["stability"].update(scene="nowhere"), ["stability.scene", "'nowhere'", "allowed"]),
         (lambda c: c["speed_accuracy"]["snt1"].update(reference="snt9"), ["speed_accuracy.snt1.reference", "'snt9'"]),
+        (lambda c: c["speed_accuracy"]["snt1"].update(reference="sdnt-adaptive"),
+         ["speed_accuracy.snt1.reference", "'sdnt-adaptive'", "a point of the chart"]),
+        (lambda c: c["speed_accuracy"]["snt1"].update(reference_method="ifenn"), ["speed_accuracy.snt1.reference_method", "'ifenn'"]),
         (lambda c: c["ifenn_runs"]["snt1-I-pz"].update(evaluation="convolution"),
          ["ifenn_runs.snt1-I-pz.inference", "process_zone needs", "'convolution'"]),
         # refused here, not when the mesh is built or PETSc starts

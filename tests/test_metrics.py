@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.studies.metrics import crack_iou, dissipated_energy, force_curve_error, timing
+from ifenn.studies.metrics import crack_iou, dissipated_energy, force_curve_error, post_peak_rms, timing
 
 
 @pytest.mark.parametrize("lc_over_h_px", [6, 12])
@@ -91,3 +91,15 @@ def test_post_switch_error_counts_only_hybrid_increments():
     assert out["post_switch_increments"] == 5
     assert out["post_switch_rms_error"] == pytest.approx(1.0 / 10.0)
     assert out["post_switch_max_error"] == pytest.approx(1.0 / 10.0)
+
+
+def test_post_peak_rms_counts_only_after_the_reference_peak():
+    """A curve equal to the reference before its peak and 2 N/mm above it after: the RMS is 2 /
+    peak, whatever the run's own increments; a run that ends before the peak has none (NaN)."""
+    u_ref = np.linspace(0.0, 1.0, 101)
+    f_ref = 100.0 * np.minimum(u_ref / 0.4, np.maximum(0.0, (1.0 - u_ref) / 0.6))   # peak 100 at u = 0.4
+    u = np.linspace(0.0, 1.0, 37)
+    force = np.interp(u, u_ref, f_ref) + np.where(u > 0.4, 2.0, 0.0)
+    assert abs(post_peak_rms(u, force, u_ref, f_ref) - 0.02) < 1e-12
+    assert abs(post_peak_rms(u, -force, u_ref, f_ref) - 0.02) < 1e-12    # |F|: the sign of a reaction is a convention
+    assert np.isnan(post_peak_rms(u[u < 0.3], force[u < 0.3], u_ref, f_ref))

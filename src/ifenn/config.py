@@ -21,6 +21,8 @@ import yaml
 REPO = Path(__file__).resolve().parents[2]
 SCHEMA_PATH = REPO / "config" / "schema.yaml"
 EDGES = ("left", "right", "bottom", "top")
+# speed_accuracy: method -> the config section of its runs
+SPEED_ACCURACY_METHODS = {"fem": "fem_runs", "ifenn": "ifenn_runs", "adaptive": "adaptive_runs"}
 
 
 class ConfigError(ValueError):
@@ -288,7 +290,14 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
             problems.append(f"config key 'figures.comparisons.{run}.verified': '{other}' continues FEM run "
                             f"'{runs[other]['fem_run']}', not '{runs[run]['fem_run']}'")
     for scene, setup in config.get("speed_accuracy", {}).items():
-        for key, pool in (("reference", "fem_runs"), ("fem", "fem_runs"), ("ifenn", "ifenn_runs"), ("adaptive", "adaptive_runs")):
+        method = setup.get("reference_method", "fem")
+        if method not in SPEED_ACCURACY_METHODS:
+            problems.append(f"config key 'speed_accuracy.{scene}.reference_method': '{method}'; allowed: {list(SPEED_ACCURACY_METHODS)}")
+            method = "fem"
+        elif setup["reference"] not in setup.get(method, []):
+            problems.append(f"config key 'speed_accuracy.{scene}.reference': '{setup['reference']}' must be one of the "
+                            f"scene's {method} runs (a point of the chart); listed: {setup.get(method, [])}")
+        for key, pool in (("reference", SPEED_ACCURACY_METHODS[method]), *SPEED_ACCURACY_METHODS.items()):
             names = [setup[key]] if key == "reference" else setup.get(key, [])
             for run in names:
                 if run not in config.get(pool, {}):

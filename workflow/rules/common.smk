@@ -103,7 +103,7 @@ def run_pairs():
 def speed_accuracy_dirs():
     """{"fem": {run: directory}, "ifenn": {run: directory}, "adaptive": {run: directory}} of the speed-accuracy runs."""
     setups = config["speed_accuracy"].values()
-    return {"fem": {r: f"results/fem/{r}" for s in setups for r in [s["reference"], *s.get("fem", [])]},
+    return {"fem": {r: f"results/fem/{r}" for s in setups for r in s.get("fem", [])},
             "ifenn": {r: f"results/ifenn/{r}" for s in setups for r in s.get("ifenn", [])},
             "adaptive": {r: f"results/adaptive/{r}" for s in setups for r in s.get("adaptive", [])}}
 

@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_provenance, read_spec
+from ifenn.studies.metrics import post_peak_rms
 
 TARGETS = {"post_peak_rms_pct": 2.0, "peak_error_pct": 1.0, "dofs_fraction": 0.30}
 
@@ -33,16 +34,6 @@ def uniform_dofs(scene: dict) -> int:
     from ifenn.fem.mesh import build_mesh
 
     return 2 * len(build_mesh(scene).points)
-
-
-def _post_peak(u: np.ndarray, force: np.ndarray, fine: tuple[np.ndarray, np.ndarray]) -> float:
-    u_fine, f_fine = fine
-    k = int(np.argmax(f_fine))
-    after = (u > u_fine[k] + 1e-15) & (u <= u_fine[-1] + 1e-15)
-    if not after.any():
-        return np.nan
-    error = force[after] - np.interp(u[after], u_fine, f_fine)
-    return float(100 * np.sqrt(np.mean(error**2)) / f_fine[k])
 
 
 def resolution_rows(fem: pd.DataFrame, fine: pd.DataFrame, adaptive: dict[str, pd.DataFrame], fine_dofs: int, fem_dofs: int,
@@ -58,7 +49,7 @@ def resolution_rows(fem: pd.DataFrame, fine: pd.DataFrame, adaptive: dict[str, p
         u, force = history.u.to_numpy(), np.abs(history.reaction_force.to_numpy())
         dofs = history.dofs.to_numpy() if "dofs" in history else np.full(len(history), fem_dofs)
         row = {"run": name, "method": method,
-               "post_peak_rms_vs_fine_pct": _post_peak(u, force, reference),
+               "post_peak_rms_vs_fine_pct": 100 * post_peak_rms(u, force, *reference),
                "peak_error_vs_fine_pct": float(100 * (force.max() / peak_fine - 1)),
                "wall_s": wall[name or "fem"], "wall_fem_h_s": wall["fem"],
                "dofs_fraction_of_fine": float(dofs.mean() / fine_dofs), "dofs_fraction_of_fine_max": float(dofs.max() / fine_dofs),

@@ -43,6 +43,19 @@ def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+def post_peak_rms(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force_ref: np.ndarray) -> float:
+    """RMS of |F| - |F_ref| (the reference curve interpolated at the run's u) over the run's
+    increments after the reference's peak and within its u range, over the reference's peak
+    (a fraction); NaN when the run has no such increment."""
+    force, force_ref = np.abs(force), np.abs(force_ref)
+    k = int(np.argmax(force_ref))
+    after = (u > u_ref[k] + 1e-15) & (u <= u_ref[-1] + 1e-15)
+    if not after.any():
+        return np.nan
+    error = force[after] - np.interp(u[after], u_ref, force_ref)
+    return float(np.sqrt(np.mean(error**2)) / force_ref[k])
+
+
 def post_switch_force_error(fem: pd.DataFrame, ifenn: pd.DataFrame) -> dict:
     """IFENN against FEM where the two can differ, after the switch-over: over the hybrid
     increments (within FEM's u range), the RMS and the largest |F_IFENN| - |F_FEM| (FEM

@@ -379,7 +379,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel(f"wall time, {title} (s, sum of increments)")
-            ax.set_ylabel(f"force-curve L2 error vs {rows.reference.iloc[0]} (%)")
+            ax.set_ylabel(f"force-curve L2 error vs {rows.reference.iloc[0]} (%, converged reference)")
             ax.set_title(f"{scene}: {title}")
             ax.grid(True, which="both", alpha=0.3)
         handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
