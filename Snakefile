@@ -39,8 +39,8 @@ include: "workflow/rules/adaptive.smk"
 rule all:
     input:
         expand("results/mesh/{scene}.png", scene=config["scenes"]),
-        expand("results/fem/{run}/history.csv", run=config["fem_runs"]),
-        expand("results/figures/fem/{run}_force_displacement.png", run=config["fem_runs"]),
+        expand("results/fem/{run}/history.csv", run=ALL_FEM_RUNS),
+        expand("results/figures/fem/{run}_force_displacement.png", run=ALL_FEM_RUNS),
         "results/figures/training/training_data.png",
         "results/figures/training/training.png",
         "results/picnn/scores.csv",

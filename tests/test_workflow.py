@@ -2,6 +2,7 @@
 and a bad config value stopping everything before any job starts."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -114,6 +115,28 @@ def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_wor
     rules = {line.split()[0] for line in text.splitlines() if line.strip() and line.split()[0].isidentifier() and len(line.split()) == 2}
     assert {"ifenn", "ifenn_spec", "accuracy_table"} <= rules, text
     assert not rules & {"fem", "fem_spec", "mesh", "train_picnn", "training_data"}, text
+
+
+def test_adaptive_finer_references_replace_the_uniform_ones(tmp_path):
+    """finer_references: adaptive: each finer reference of reference_convergence and
+    adaptive_resolution is its adaptive run; `all` no longer runs the uniform ones, except those
+    another study names (speed_accuracy's points snt1-III-fine and sdnt-fine)."""
+    override = tmp_path / "override.yaml"
+    override.write_text("finer_references: adaptive\n")
+    dry = _snakemake("--directory", str(tmp_path), "--configfile", str(REPO / "config" / "quick.yaml"), str(override),
+                     "-n", "--cores", "1", "all", cwd=tmp_path)
+    assert dry.returncode == 0, dry.stderr[-3000:]
+    jobs, rule = set(), None
+    for line in (dry.stdout + dry.stderr).splitlines():
+        if match := re.match(r"(?:local)?rule (\w+):", line):
+            rule = match.group(1)
+        elif match := re.match(r"\s+wildcards: run=([\w.-]+)", line):
+            jobs.add((rule, match.group(1)))
+    runs = {run for rule, run in jobs if rule == "fem"}
+    adaptive = {run for rule, run in jobs if rule == "adaptive"}
+    fines = {"snt1-II-fine", "snt1-III-fine", "sdnt-fine", "adnt-fine", "snt-shear-fine"}
+    assert {f"{fine}-adaptive" for fine in fines} <= adaptive, adaptive
+    assert runs & fines == {"snt1-III-fine", "sdnt-fine"}, runs
 
 
 def test_lint_and_slurm_profile_dry_run(tmp_path):

@@ -138,6 +138,9 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH, petsc_names: 
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
     config = copy.deepcopy(config)
     _fill_defaults(config, schema, schema)
+    for fine, name in finer_reference_runs(config).items():
+        if name != fine:
+            config["adaptive_runs"].setdefault(name, {"fem_run": fine, "adaptive_mesh": {}})
     problems = _semantic_problems(config, petsc_names) + _adaptive_problems(config, schema)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
@@ -355,6 +358,23 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
             problems.append(f"config key 'ifenn_runs.{name}.pixel_padding': the verified step's pixel equation needs "
                             f"'replicate' or 'zeros', got '{padding}'")
     return problems
+
+
+def finer_reference_runs(config: dict) -> dict[str, str]:
+    """Each finer reference of reference_convergence and adaptive_resolution (``fine_fem_run``)
+    -> the run that computes it: itself (``finer_references: uniform``) or its adaptive run
+    '<fine_fem_run>-adaptive' (``adaptive``: the same scene and schedule on the adaptive mesh,
+    whose pixels and finest cells have that scene's own spacing, h/4 for the -fine scenes)."""
+    fines = [entry["fine_fem_run"] for section in ("reference_convergence", "adaptive_resolution")
+             for entry in config.get(section, {}).values()]
+    adaptive = config.get("finer_references", "uniform") == "adaptive"
+    return {fine: f"{fine}-adaptive" if adaptive else fine for fine in fines}
+
+
+def finer_reference_dir(config: dict, fine_fem_run: str) -> str:
+    """Where the finer reference named ``fine_fem_run`` lives (:func:`finer_reference_runs`)."""
+    name = finer_reference_runs(config).get(fine_fem_run, fine_fem_run)
+    return f"results/adaptive/{name}" if name != fine_fem_run else f"results/fem/{fine_fem_run}"
 
 
 def _reference_convergence_problems(config: dict) -> list[str]:

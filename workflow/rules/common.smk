@@ -4,7 +4,8 @@ import sys
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn.config import ConfigError, adaptive_run_spec, fem_run_spec, ifenn_run_spec, schedule_increments, switch_over, training_spec, validate_config
+from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
+                          schedule_increments, switch_over, training_spec, validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 
@@ -22,6 +23,11 @@ config.update(_validated)
 PYTHON = "python" if DeploymentMethod.CONDA in workflow.deployment_settings.deployment_method else sys.executable
 SCRIPTS = os.path.join(workflow.basedir, "workflow", "scripts")
 MPI_LAUNCHER = "mpirun -n {ranks} --oversubscribe"
+
+
+# The FEM runs `all` asks for by name: every one but the finer references that run on the adaptive
+# mesh instead (finer_references: adaptive); a rule that reads such a run still pulls it in.
+ALL_FEM_RUNS = [run for run in config["fem_runs"] if finer_reference_runs(config).get(run, run) == run]
 
 
 def fem_spec_json(run):
@@ -168,7 +174,7 @@ def whole_path_dirs():
 def reference_convergence_dirs():
     """Case of config 'reference_convergence' -> its runs and their directories."""
     return {case: {"fem_run": entry["fem_run"], "fine_fem_run": entry["fine_fem_run"],
-                   "fem_dir": f"results/fem/{entry['fem_run']}", "fine_dir": f"results/fem/{entry['fine_fem_run']}",
+                   "fem_dir": f"results/fem/{entry['fem_run']}", "fine_dir": finer_reference_dir(config, entry["fine_fem_run"]),
                    "ifenn_dirs": {run: f"results/ifenn/{run}" for run in entry["ifenn_runs"]}}
             for case, entry in config.get("reference_convergence", {}).items()}
 
@@ -201,7 +207,7 @@ def adaptive_inputs(wildcards):
 
 def adaptive_resolution_cases():
     return {case: {"fem_run": e["fem_run"], "fine_fem_run": e["fine_fem_run"], "fem_dir": f"results/fem/{e['fem_run']}",
-                   "fine_dir": f"results/fem/{e['fine_fem_run']}",
+                   "fine_dir": finer_reference_dir(config, e["fine_fem_run"]),
                    "adaptive_dirs": {run: f"results/adaptive/{run}" for run in e["adaptive_runs"]}}
             for case, e in config.get("adaptive_resolution", {}).items()}
 

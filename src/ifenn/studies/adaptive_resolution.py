@@ -20,11 +20,13 @@ dofs <= 30 % of the fine mesh.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_provenance, read_spec
-from ifenn.studies.metrics import post_peak_rms
+from ifenn.studies.metrics import fine_label, post_peak_rms
 
 TARGETS = {"post_peak_rms_pct": 2.0, "peak_error_pct": 1.0, "dofs_fraction": 0.30}
 
@@ -77,6 +79,7 @@ def adaptive_resolution_table(cases: dict[str, dict]) -> pd.DataFrame:
         for row in resolution_rows(read_history(where["fem_dir"]), read_history(where["fine_dir"]), adaptive,
                                    uniform_dofs(fine_scene), uniform_dofs(fem_scene), wall, methods):
             rows.append({"case": case, "fem_run": where["fem_run"], "fine_fem_run": where["fine_fem_run"],
+                         "fine_reference": f"{Path(where['fine_dir']).parent.name}/{Path(where['fine_dir']).name}",
                          **{**row, "run": row["run"] or where["fem_run"]}})
     return pd.DataFrame(rows)
 
@@ -84,7 +87,7 @@ def adaptive_resolution_table(cases: dict[str, dict]) -> pd.DataFrame:
 def adaptive_resolution_curves(cases: dict[str, dict]) -> dict[str, dict[str, pd.DataFrame]]:
     """case -> {label: history} for the figure: FEM at h, the finer FEM, then the adaptive runs."""
     return {case: {f"FEM {where['fem_run']}": read_history(where["fem_dir"]),
-                   f"FEM {where['fine_fem_run']} (finer)": read_history(where["fine_dir"]),
+                   fine_label(where): read_history(where["fine_dir"]),
                    **{f"adaptive {run}": read_history(path) for run, path in where["adaptive_dirs"].items()}}
             for case, where in cases.items()}
 

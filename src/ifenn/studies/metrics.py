@@ -43,6 +43,14 @@ def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+def fine_label(where: dict) -> str:
+    """A case's finer reference in a legend: the uniform FEM run, or its adaptive-mesh run
+    (config ``finer_references``), from the reference's directory."""
+    name = str(where["fine_dir"]).rstrip("/").split("/")[-1]
+    kind = "adaptive mesh" if "/adaptive/" in f"/{where['fine_dir']}" else "FEM"
+    return f"{kind} {name} (finer)"
+
+
 def post_peak_rms(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force_ref: np.ndarray) -> float:
     """RMS of |F| - |F_ref| (the reference curve interpolated at the run's u) over the run's
     increments after the reference's peak and within its u range, over the reference's peak

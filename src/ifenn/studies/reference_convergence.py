@@ -21,10 +21,13 @@ drops, ``u_half_drop`` is where |F| first falls below half of the peak of FEM at
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history
+from ifenn.studies.metrics import fine_label
 
 
 def _curve(history: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -81,7 +84,8 @@ def reference_convergence_table(cases: dict[str, dict]) -> pd.DataFrame:
     for case, where in cases.items():
         ifenn = {run: read_history(path) for run, path in where["ifenn_dirs"].items()}
         for row in reference_convergence_rows(read_history(where["fem_dir"]), read_history(where["fine_dir"]), ifenn):
-            rows.append({"case": case, "fem_run": where["fem_run"], "fine_fem_run": where["fine_fem_run"], **row})
+            rows.append({"case": case, "fem_run": where["fem_run"], "fine_fem_run": where["fine_fem_run"],
+                         "fine_reference": f"{Path(where['fine_dir']).parent.name}/{Path(where['fine_dir']).name}", **row})
     return pd.DataFrame(rows)
 
 
@@ -90,7 +94,7 @@ def reference_convergence_curves(cases: dict[str, dict]) -> dict[str, dict[str, 
     curves = {}
     for case, where in cases.items():
         curves[case] = {f"FEM {where['fem_run']}": read_history(where["fem_dir"]),
-                        f"FEM {where['fine_fem_run']} (finer)": read_history(where["fine_dir"]),
+                        fine_label(where): read_history(where["fine_dir"]),
                         **{f"IFENN {run}": read_history(path) for run, path in where["ifenn_dirs"].items()}}
     return curves
 
