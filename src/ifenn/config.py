@@ -447,6 +447,10 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
             where = ".".join(map(str, err.absolute_path)) or ""
             owner = f"{key}.adaptive_mesh" if (where.split(".")[0] in entry.get("adaptive_mesh", {}) or not where) else "adaptive_mesh"
             problems.append(f"config key '{owner}{'.' + where if where else ''}': {err.message}")
+        presets = config["solver"]["linear_solver_presets"]
+        if merged.get("linear_solvers") is not None and merged["linear_solvers"] not in presets:
+            owner = f"{key}.adaptive_mesh" if "linear_solvers" in entry.get("adaptive_mesh", {}) else "adaptive_mesh"
+            problems.append(f"config key '{owner}.linear_solvers': '{merged['linear_solvers']}' is not a preset; allowed: {sorted(presets)}")
         trigger, buffer = merged.get("trigger_lc", 1.5), merged.get("buffer_lc", 3.0)
         if isinstance(trigger, int | float) and isinstance(buffer, int | float) and trigger > buffer:
             problems.append(f"config key '{key}.adaptive_mesh.trigger_lc': {trigger} exceeds buffer_lc {buffer}; the mesh "
@@ -473,7 +477,11 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
         hybrid = ifenn_run_spec(config, entry["ifenn_run"])
         spec.update({k: v for k, v in hybrid.items() if k not in spec and k not in ("switch_over", "switch_increment")},
                     ifenn_run=entry["ifenn_run"])
-    spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh={**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})})
+    settings = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
+    spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh=settings)
+    if settings.get("linear_solvers"):   # the displacement solve's preset on the adaptive mesh
+        preset = config["solver"]["linear_solver_presets"][settings["linear_solvers"]]
+        spec.update(linear_solvers=settings["linear_solvers"], petsc={**spec["petsc"], "displacement": preset["displacement"]})
     return spec
 
 

@@ -100,6 +100,7 @@ class MeshSettings:
     trigger_lc: float = 1.0
     phase_field_tolerance: float = 1e-6
     max_remesh: int = 6
+    linear_solvers: str = "direct"      # the displacement solve's preset (config.adaptive_run_spec applies it)
 
     @classmethod
     def from_spec(cls, spec: dict) -> MeshSettings:
