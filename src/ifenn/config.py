@@ -140,7 +140,7 @@ def validate_config(config: dict, schema_path: Path = SCHEMA_PATH, petsc_names: 
     _fill_defaults(config, schema, schema)
     for fine, name in finer_reference_runs(config).items():
         if name != fine:
-            config["adaptive_runs"].setdefault(name, {"fem_run": fine, "adaptive_mesh": {}})
+            config["adaptive_runs"].setdefault(name, {"fem_run": fine, "adaptive_mesh": dict(config["finer_reference_mesh"])})
     problems = _semantic_problems(config, petsc_names) + _adaptive_problems(config, schema)
     if problems:
         raise ConfigError("invalid configuration:\n  " + "\n  ".join(problems))
@@ -364,7 +364,8 @@ def finer_reference_runs(config: dict) -> dict[str, str]:
     """Each finer reference of reference_convergence and adaptive_resolution (``fine_fem_run``)
     -> the run that computes it: itself (``finer_references: uniform``) or its adaptive run
     '<fine_fem_run>-adaptive' (``adaptive``: the same scene and schedule on the adaptive mesh,
-    whose pixels and finest cells have that scene's own spacing, h/4 for the -fine scenes)."""
+    with ``finer_reference_mesh``'s settings: by default phi on that scene's pixels, h/4 for the
+    -fine scenes, and the finest displacement cells two pixels wide, h/2)."""
     fines = [entry["fine_fem_run"] for section in ("reference_convergence", "adaptive_resolution")
              for entry in config.get(section, {}).values()]
     adaptive = config.get("finer_references", "uniform") == "adaptive"
