@@ -4,7 +4,7 @@ import copy
 
 import pytest
 
-from ifenn.config import ConfigError, fem_run_spec, load_values, validate_config
+from ifenn.config import ConfigError, fem_run_spec, load_values, speed_accuracy_setups, validate_config
 
 
 def test_paper_config_has_the_seven_runs(paper_config):
@@ -81,6 +81,21 @@ def test_defaults_are_filled(paper_config):
     config = copy.deepcopy(paper_config)
     del config["material"]["residual_stiffness"]
     assert validate_config(config)["material"]["residual_stiffness"] == 0.0
+
+
+def test_adaptive_finer_references_replace_the_speed_accuracy_points(paper_config):
+    """Under finer_references: adaptive a finer reference listed as a FEM point of the chart is its
+    adaptive run (the run `all` makes); the other points and the reference stay as they are."""
+    config = validate_config({**copy.deepcopy(paper_config), "finer_references": "adaptive"})
+    for scene, setup in speed_accuracy_setups(config).items():
+        raw = paper_config["speed_accuracy"][scene]
+        fines = [run for run in raw["fem"] if run.endswith("-fine")]
+        assert fines, scene
+        assert setup["fem"] == [run for run in raw["fem"] if run not in fines]
+        assert setup["adaptive"] == raw.get("adaptive", []) + [f"{run}-adaptive" for run in fines]
+        assert all(run in config["adaptive_runs"] for run in setup["adaptive"])
+        assert setup["reference"] == raw["reference"]
+    assert speed_accuracy_setups(paper_config) == paper_config["speed_accuracy"]
 
 
 @pytest.mark.parametrize(

@@ -372,6 +372,24 @@ def finer_reference_runs(config: dict) -> dict[str, str]:
     return {fine: f"{fine}-adaptive" if adaptive else fine for fine in fines}
 
 
+def speed_accuracy_setups(config: dict) -> dict:
+    """config 'speed_accuracy' with each finer reference in a ``fem`` list replaced by the run that
+    computes it (:func:`finer_reference_runs`): under ``finer_references: adaptive`` it moves to the
+    ``adaptive`` list as '<fine_fem_run>-adaptive', so the chart shows the reference that `all` runs
+    (and `all` need not run the uniform one for the chart alone)."""
+    replaced = {fine: run for fine, run in finer_reference_runs(config).items() if run != fine}
+    setups = {}
+    for scene, setup in config.get("speed_accuracy", {}).items():
+        setup = dict(setup)
+        fem = list(setup.get("fem", []))
+        moved = [replaced[run] for run in fem if run in replaced]
+        if moved:
+            setup["fem"] = [run for run in fem if run not in replaced]
+            setup["adaptive"] = list(setup.get("adaptive", [])) + [run for run in moved if run not in setup.get("adaptive", [])]
+        setups[scene] = setup
+    return setups
+
+
 def finer_reference_dir(config: dict, fine_fem_run: str) -> str:
     """Where the finer reference named ``fine_fem_run`` lives (:func:`finer_reference_runs`)."""
     name = finer_reference_runs(config).get(fine_fem_run, fine_fem_run)

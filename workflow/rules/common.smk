@@ -5,7 +5,7 @@ import sys
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
-                          schedule_increments, switch_over, training_spec, validate_config)
+                          schedule_increments, speed_accuracy_setups, switch_over, training_spec, validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 
@@ -108,7 +108,7 @@ def run_pairs():
 
 def speed_accuracy_dirs():
     """{"fem": {run: directory}, "ifenn": {run: directory}, "adaptive": {run: directory}} of the speed-accuracy runs."""
-    setups = config["speed_accuracy"].values()
+    setups = speed_accuracy_setups(config).values()
     return {"fem": {r: f"results/fem/{r}" for s in setups for r in s.get("fem", [])},
             "ifenn": {r: f"results/ifenn/{r}" for s in setups for r in s.get("ifenn", [])},
             "adaptive": {r: f"results/adaptive/{r}" for s in setups for r in s.get("adaptive", [])}}

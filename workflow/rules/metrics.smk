@@ -64,7 +64,7 @@ rule speed_accuracy:
         table=report("results/tables/speed_accuracy.csv", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
         figure=report("results/figures/speed_accuracy.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
     params:
-        setups=config["speed_accuracy"],
+        setups=speed_accuracy_setups(config),
         run_dirs=lambda w: speed_accuracy_dirs(),
     conda:
         "../envs/ifenn.yaml"
