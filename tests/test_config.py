@@ -95,7 +95,8 @@ def test_adaptive_finer_references_replace_the_speed_accuracy_points(paper_confi
         assert setup["adaptive"] == raw.get("adaptive", []) + [f"{run}-adaptive" for run in fines]
         assert all(run in config["adaptive_runs"] for run in setup["adaptive"])
         assert setup["reference"] == raw["reference"]
-    assert speed_accuracy_setups(paper_config) == paper_config["speed_accuracy"]
+    uniform = validate_config({**copy.deepcopy(paper_config), "finer_references": "uniform"})
+    assert speed_accuracy_setups(uniform) == uniform["speed_accuracy"]
 
 
 @pytest.mark.parametrize(
