@@ -51,6 +51,7 @@ def assert_refused(paper_config, mutate, expected):
          ["speed_accuracy.snt1.reference", "'sdnt-adaptive'", "a point of the chart"]),
         (lambda c: c["speed_accuracy"]["snt1"].update(reference_method="ifenn"), ["speed_accuracy.snt1.reference_method", "'ifenn'"]),
         (lambda c: c.update(finer_references="coarse"), ["finer_references", "'coarse'"]),
+        (lambda c: c.update(device="tpu"), ["device", "'tpu'"]),
         (lambda c: c["adaptive_mesh"].update(linear_solvers="lu"), ["adaptive_mesh.linear_solvers", "'lu'", "allowed"]),
         (lambda c: c["ifenn_runs"]["snt1-I-pz"].update(evaluation="convolution"),
          ["ifenn_runs.snt1-I-pz.inference", "process_zone needs", "'convolution'"]),

@@ -52,7 +52,8 @@ def test_whole_path_verified_ifenn_reaches_fem_peak(fem_run, quick_config, tmp_p
     _, tmp, fem = fem_run
     spec = ifenn_run_spec(quick_config, "snt1-II-whole")
     model = _random_model(spec, tmp_path / "random.pt")
-    whole = pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", None, model, tmp_path / "whole", progress=False))
+    whole = pd.DataFrame(run_ifenn(spec, tmp / "mesh.xdmf", None, model, tmp_path / "whole", progress=False, device="cpu"))
+    assert json.loads((tmp_path / "whole" / "provenance.json").read_text())["network_device"] == "cpu"
     assert len(whole) == len(fem) and (whole.hybrid_active == 1).all()
     # the network predicts from the first increment on, and again wherever the input moved by the
     # verification's network_tolerance (not every increment: elsewhere the last verified phi stays)

@@ -1,9 +1,11 @@
 """Command line (run under ``mpirun -n N`` for N ranks):
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
-  python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] --out DIR
-  python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] --out DIR   (a mesh that follows the crack; one process)
-  python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt]   (stability sweep)
+  python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] [--device D] --out DIR
+  python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] [--device D] --out DIR   (a mesh that follows the crack; one process)
+  python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt] [--device D]   (stability sweep)
+
+--device (auto, cpu, cuda; default auto: CUDA when torch sees one): where the network runs.
   python -m ifenn stage-times [WORKDIR]   what a workflow run spent per stage (its benchmark files)
 """
 
@@ -13,6 +15,8 @@ import argparse
 import json
 import logging
 import sys
+
+from ifenn.device import DEVICES
 
 
 def main(argv=None) -> int:
@@ -30,16 +34,19 @@ def main(argv=None) -> int:
     hybrid.add_argument("--model", default=None, help="trained PICNN (needed when the predictor is 'picnn')")
     hybrid.add_argument("--out", required=True)
     hybrid.add_argument("--no-progress", action="store_true")
+    hybrid.add_argument("--device", default="auto", choices=DEVICES, help="where the network runs (config 'device'; default auto)")
     adaptive = sub.add_parser("adaptive", help="run a FEM run's scene and schedule on a displacement mesh that follows the crack")
     adaptive.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.adaptive_run_spec)")
     adaptive.add_argument("--model", default=None, help="trained PICNN (a verified IFENN run)")
     adaptive.add_argument("--out", required=True)
     adaptive.add_argument("--no-progress", action="store_true")
+    adaptive.add_argument("--device", default="auto", choices=DEVICES, help="where the network runs (config 'device'; default auto)")
     cell = sub.add_parser("cell", help="one stability-sweep cell: FEM, or IFENN continuing --fem-dir; failures are recorded")
     cell.add_argument("--spec", required=True)
     cell.add_argument("--out", required=True)
     cell.add_argument("--fem-dir", default=None)
     cell.add_argument("--model", default=None)
+    cell.add_argument("--device", default="auto", choices=DEVICES, help="where the network runs (config 'device'; default auto)")
     times = sub.add_parser("stage-times", help="sum the workflow's benchmark files (benchmarks/<stage>/*.tsv) by stage")
     times.add_argument("workdir", nargs="?", default=".", help="the workflow's working directory (default: here)")
     args = parser.parse_args(argv)
@@ -64,19 +71,19 @@ def main(argv=None) -> int:
             spec = json.load(stream)
         if args.fem_dir is None and spec.get("switch_over", "phi_threshold") != "start":
             parser.error(f"run {spec['name']} switches over from a FEM run ({spec.get('switch_over', 'phi_threshold')}): --fem-dir is needed")
-        run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress)
+        run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress, device=args.device)
     elif args.command == "adaptive":
         from ifenn.adaptive.run import run_adaptive
 
         with open(args.spec) as stream:
             spec = json.load(stream)
-        run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model)
+        run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device)
     elif args.command == "cell":
         from ifenn.studies.stability import run_cell
 
         with open(args.spec) as stream:
             spec = json.load(stream)
-        status = run_cell(spec, args.out, args.fem_dir, args.model)
+        status = run_cell(spec, args.out, args.fem_dir, args.model, args.device)
         logging.getLogger("ifenn").info("cell %s: %s", spec["name"], status)
     return 0
 

@@ -18,8 +18,9 @@ from typing import Any
 import jsonschema
 import yaml
 
-REPO = Path(__file__).resolve().parents[2]
-SCHEMA_PATH = REPO / "config" / "schema.yaml"
+from ifenn.network.settings import resolve_settings
+from ifenn.schema import REPO, SCHEMA_PATH, _schema, schema_default, schema_defaults  # noqa: F401 (re-exported)
+
 EDGES = ("left", "right", "bottom", "top")
 # speed_accuracy: method -> the config section of its runs
 SPEED_ACCURACY_METHODS = {"fem": "fem_runs", "ifenn": "ifenn_runs", "adaptive": "adaptive_runs"}
@@ -48,27 +49,6 @@ def load_config(*paths: str | Path) -> dict:
         with open(path) as stream:
             config = deep_merge(config, yaml.safe_load(stream) or {})
     return validate_config(config)
-
-
-def schema_defaults(section: str) -> dict:
-    """The schema's defaults of one ``$defs`` section (e.g. 'process_zone', 'verification'):
-    the classes that take those settings default to them, so each number is written once."""
-    return {key: sub["default"] for key, sub in _schema()["$defs"][section]["properties"].items() if "default" in sub}
-
-
-def schema_default(*keys: str):
-    """The schema's default of a configuration key, e.g. schema_default('ifenn', 'history_cap')."""
-    node = _schema()
-    for key in keys:
-        node = node["properties"][key]
-    return node["default"]
-
-
-@functools.cache
-def _schema(path: Path = SCHEMA_PATH) -> dict:
-    """The config schema, read once per process (treat as read-only)."""
-    with open(path) as stream:
-        return yaml.safe_load(stream)
 
 
 def _key_path(path) -> str:
@@ -273,10 +253,8 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
         if bad:
             problems.append(f"config key 'picnn.training_increments': {bad} exceed the {n_inc} increments of run '{picnn['training_run']}' (allowed 1..{n_inc})")
     try:
-        from ifenn.network.training import resolve_settings
-
         resolve_settings({"preset": picnn["preset"], **picnn["settings"]})
-    except (KeyError, ImportError) as error:
+    except KeyError as error:
         problems.append(f"config key 'picnn.settings': {error}")
     figures = config["figures"]
     named = [(f"figures.comparisons.{r}", r) for r in figures["comparisons"]]

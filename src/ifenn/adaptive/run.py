@@ -74,6 +74,7 @@ import scipy.ndimage
 from ifenn import run_files
 from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
 from ifenn.config import spec_hash
+from ifenn.device import device_record, network_device
 from ifenn.fem.loading import load_control
 from ifenn.io import progress_bar, provenance
 from ifenn.pixels import PixelGrid, SlitCuts
@@ -163,7 +164,8 @@ def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.nda
 class AdaptiveRun:
     """One run on a displacement mesh that follows the crack (module doc)."""
 
-    def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None):
+    def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None,
+                 device="auto"):
         from ifenn.hybrid.verification import PixelEquation
 
         self.spec, self.out_dir = spec, Path(out_dir)
@@ -190,12 +192,14 @@ class AdaptiveRun:
         self.region = self.mesh_region = self._fine_region(self.phi, self.history)   # H0: a history notch's tip
         self.problem = None
         self.verified = None
+        self.device = None
         if (spec.get("verification") or {}).get("enabled"):
             from ifenn.hybrid.runs import make_inference
 
             if model_path is None:
                 raise ValueError(f"run {spec['name']} is a verified IFENN run: it needs the trained network (model_path)")
-            self.verified = make_inference(spec, model_path, self.grid.h_px, self.grid.shape)
+            self.device = network_device(spec, device)
+            self.verified = make_inference(spec, model_path, self.grid.h_px, self.grid.shape, self.device)
 
     def _phase_field(self, phi: np.ndarray, history: np.ndarray) -> tuple[np.ndarray, int, float, float]:
         """The phase field of ``history`` (module doc, step 3): the certified pixel solve from
@@ -362,13 +366,14 @@ class AdaptiveRun:
         run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=COLUMNS))
         run_files.write_provenance(self.out_dir, provenance(self.hash, wall_s, run=self.spec["name"], mpi_ranks=1,
                                                            phase_field_step="verified" if self.verified else "pixel-exact", increments=len(self.rows),
-                                                           displacement_mesh="adaptive"))
+                                                           displacement_mesh="adaptive", **device_record(self.device)))
         for path in self.work_dir.glob("*"):
             path.unlink()
         self.work_dir.rmdir()
 
 
-def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None) -> list[dict]:
+def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None,
+                 device="auto") -> list[dict]:
     """Run ``spec`` (:func:`ifenn.config.adaptive_run_spec`) on a mesh that follows the crack,
     with the trained network at ``model_path`` for a verified IFENN run; one process at a time
     writes ``out_dir``."""
@@ -377,4 +382,4 @@ def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True, model_p
     if MPI.COMM_WORLD.size > 1:
         raise RuntimeError("adaptive-mesh runs are serial: start them on one process")
     with run_files.exclusive_writer(out_dir, MPI.COMM_WORLD):
-        return AdaptiveRun(spec, out_dir, progress, model_path).run()
+        return AdaptiveRun(spec, out_dir, progress, model_path, device).run()

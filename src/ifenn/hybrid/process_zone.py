@@ -39,8 +39,8 @@ import time
 import numpy as np
 import scipy.ndimage
 
-from ifenn.config import schema_defaults
 from ifenn.pixels import box_area, box_within, grow_box
+from ifenn.schema import schema_defaults
 
 #: the settings' defaults: those of the config schema ('ifenn.process_zone')
 _DEFAULTS = schema_defaults("process_zone")

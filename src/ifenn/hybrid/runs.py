@@ -26,6 +26,7 @@ from pathlib import Path
 from mpi4py import MPI
 
 from ifenn import run_files
+from ifenn.device import device_record, network_device
 
 PREDICTORS = ("picnn", "exact_pixel")
 
@@ -81,11 +82,12 @@ def slit_cuts(spec: dict):
     return SlitCuts.for_scene(spec["scene"], PixelGrid.for_scene(spec["scene"]), spec["pixel_padding"])
 
 
-def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None):
+def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None,
+                   device="auto"):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
     checked and corrected by the pixel equation when ``spec['verification']['enabled']``
     (:mod:`ifenn.hybrid.verification`). ``shape``: the image's, when known (what the network keeps
-    is then allocated now)."""
+    is then allocated now). ``device``: where the network runs (:mod:`ifenn.device`)."""
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
         from ifenn.hybrid.verification import PixelEquation, VerifiedInference
@@ -99,35 +101,38 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             zone = spec["process_zone"]
             if verification.get("network_tolerance") is not None:
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
-            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape)
+            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device)
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
         return VerifiedInference(network, equation, verification["tolerance"],
                                  verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start)
-    return _network_inference(spec, model_path, h_px, shape)
+    return _network_inference(spec, model_path, h_px, shape, device)
 
 
-def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD):
+def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, device="auto"):
     """The hybrid phase-field step of ``spec`` on ``problem``: its inference (:func:`make_inference`,
     on rank 0), checked and corrected by the pixel equation where ``verification.enabled``."""
     from ifenn.hybrid.pixel_step import PixelPhaseField
 
     verified = bool((spec.get("verification") or {}).get("enabled"))
-    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape) if comm.rank == 0 else None
+    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape, device) if comm.rank == 0 else None
     return PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
                            spec["irreversible"], verified)
 
 
-def _network_inference(spec: dict, model_path, h_px: float, shape):
+def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"):
     from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
     if spec["predictor"] == "picnn":
+        from ifenn.device import resolve_device
         from ifenn.network.orbit import make_evaluator
         from ifenn.network.picnn import load_picnn
 
-        model, _ = load_picnn(model_path)
-        evaluator = make_evaluator(model, spec.get("evaluation", "orbit"))
+        device = resolve_device(device) if isinstance(device, str) else device
+        model, _ = load_picnn(model_path, device)
+        # the orbit sums are a CPU kernel; on a GPU the network's own convolutions
+        evaluator = make_evaluator(model, spec.get("evaluation", "orbit") if device.type == "cpu" else "convolution")
         if spec.get("inference", "full") == "process_zone":
             zone = spec["process_zone"]
             return ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
@@ -146,18 +151,19 @@ def _network_inference(spec: dict, model_path, h_px: float, shape):
     raise ValueError(f"ifenn predictor '{spec['predictor']}' is unknown; allowed: {PREDICTORS}")
 
 
-def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True) -> list[dict]:
+def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True, device="auto") -> list[dict]:
     """Continue the FEM run in ``fem_dir`` from its switch-over increment with IFENN (by the
     spec's ``switch_over`` criterion, module doc); with ``switch_over: start`` from the scene's
     initial state, and ``fem_dir`` is not read (it may be None). One process at a time writes
-    ``out_dir`` (:func:`ifenn.run_files.exclusive_writer`)."""
+    ``out_dir`` (:func:`ifenn.run_files.exclusive_writer`). ``device``: where the network runs
+    (:mod:`ifenn.device`; recorded in provenance.json)."""
     from ifenn.run_files import exclusive_writer
 
     with exclusive_writer(out_dir, MPI.COMM_WORLD):
-        return _run_ifenn(spec, mesh_path, fem_dir, model_path, out_dir, progress)
+        return _run_ifenn(spec, mesh_path, fem_dir, model_path, out_dir, progress, device)
 
 
-def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool) -> list[dict]:
+def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool, device="auto") -> list[dict]:
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.problem import FractureProblem
     from ifenn.fem.solver import StaggeredRun
@@ -175,8 +181,9 @@ def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bo
     record = comm.bcast(switch_record(spec, switch, rows) if comm.rank == 0 else None, root=0)
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    step = pixel_phase_field(spec, problem, model_path, comm)
+    device = network_device(spec, device)
+    step = pixel_phase_field(spec, problem, model_path, comm, device)
     start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
     run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
-                       provenance_extra={"switch_over": record})
+                       provenance_extra={"switch_over": record, **device_record(device)})
     return run.run()

@@ -84,8 +84,8 @@ import numpy as np
 import scipy.fft
 import scipy.ndimage
 
-from ifenn.config import schema_defaults
 from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
+from ifenn.schema import schema_defaults
 
 log = logging.getLogger(__name__)
 

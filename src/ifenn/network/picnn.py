@@ -33,8 +33,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ifenn.config import schema_default
 from ifenn.io import atomic_path, reading
+from ifenn.network.settings import DEFAULT_HISTORY_CAP  # H_cap, N/mm^2: the config schema's, the constructor's default
 from ifenn.pixels import LAPLACIAN_CENTRE_WEIGHT, LAPLACIAN_K9_STAR
 
 #: Padding modes understood by the network and the Laplacian. "zeros": values beyond the
@@ -179,9 +179,6 @@ class InputScaling:
 # The network
 # ---------------------------------------------------------------------------------------
 DEFAULT_CHANNELS = (1, 24, 24, 24, 1)
-#: History cap H_cap of the paper, N/mm^2 (the config is the source of truth; this is
-#: only the constructor default).
-DEFAULT_HISTORY_CAP = schema_default("ifenn", "history_cap")  # N/mm^2, the config schema's
 
 
 class PICNN(nn.Module):
@@ -252,14 +249,20 @@ class PICNN(nn.Module):
     def predict(self, history_pixels: np.ndarray) -> np.ndarray:
         """Inference: H pixel map(s) (ny, nx) or (n, ny, nx), N/mm^2 -> phi, same shape, float64."""
         history_pixels = np.asarray(history_pixels)
-        batch = torch.as_tensor(history_pixels, dtype=self._dtype()).reshape(
+        batch = torch.as_tensor(history_pixels, dtype=self._dtype(), device=self.device).reshape(
             -1, 1, *history_pixels.shape[-2:]
         )
         phi = self.phase_field(batch)
-        return phi.reshape(history_pixels.shape).double().numpy()
+        return phi.reshape(history_pixels.shape).double().cpu().numpy()
 
     def _dtype(self) -> torch.dtype:
         return self.layers[0].free_weight.dtype
+
+    @property
+    def device(self) -> torch.device:
+        """Where the weights live (:mod:`ifenn.device`); :meth:`predict` takes and returns numpy
+        arrays on the CPU and moves them to and from it."""
+        return self.layers[0].free_weight.device
 
     def n_free_parameters(self) -> int:
         """Number of trainable values (6 per 5x5 kernel)."""
@@ -277,7 +280,7 @@ def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros", cuts=N
     the scene's slits cut (:class:`ifenn.pixels.SlitCuts` of this image's shape), left out.
     Returns (n, 1, ny, nx), units 1/mm^2.
     """
-    stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype).reshape(1, 1, 3, 3)
+    stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype, device=phi.device).reshape(1, 1, 3, 3)
     neighbours = F.conv2d(_pad(phi, 1, padding), stencil) + LAPLACIAN_CENTRE_WEIGHT * phi
     if cuts:
         # cuts of one image apply to every image of the batch; stacked cuts (n, ny, nx) to each its own
@@ -285,8 +288,9 @@ def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros", cuts=N
         if tuple(phi.shape[-2:]) != tuple(cuts.shape[-2:]) or (batch and phi.shape[0] * phi.shape[1] != cuts.shape[0]):
             raise ValueError(f"slit cuts of a {cuts.shape} image on a {tuple(phi.shape)} one")
         flat = phi.reshape(-1) if batch else phi.reshape(*phi.shape[:-2], -1)
-        rows, cols = torch.as_tensor(cuts.rows), torch.as_tensor(cuts.cols)
-        flux = torch.zeros_like(flat).index_add_(-1, rows, torch.as_tensor(cuts.weights, dtype=phi.dtype) * (flat[..., cols] - flat[..., rows]))
+        rows, cols = torch.as_tensor(cuts.rows, device=phi.device), torch.as_tensor(cuts.cols, device=phi.device)
+        weights = torch.as_tensor(cuts.weights, dtype=phi.dtype, device=phi.device)
+        flux = torch.zeros_like(flat).index_add_(-1, rows, weights * (flat[..., cols] - flat[..., rows]))
         neighbours = neighbours - flux.reshape(phi.shape)
     return neighbours / h_px**2
 
@@ -492,10 +496,10 @@ def save_picnn(
         torch.save(payload, tmp)
 
 
-def load_picnn(path: str | Path) -> tuple[PICNN, dict]:
-    """Read a file written by :func:`save_picnn`.
+def load_picnn(path: str | Path, device="cpu") -> tuple[PICNN, dict]:
+    """Read a file written by :func:`save_picnn` (saved from the CPU, whatever trained it).
 
-    Returns (model in eval mode, metadata dict with h_px, Gc, lc, config_hash, extra, ...).
+    Returns (model in eval mode on ``device``, metadata dict with h_px, Gc, lc, config_hash, extra, ...).
     """
     with reading(path, "trained PICNN (torch file of ifenn.network.picnn.save_picnn)"):
         payload = torch.load(Path(path), map_location="cpu", weights_only=True)
@@ -509,6 +513,7 @@ def load_picnn(path: str | Path) -> tuple[PICNN, dict]:
     state = payload["state_dict"]
     model.to(dtype=state["layers.0.free_weight"].dtype)
     model.load_state_dict(state)
+    model.to(device)
     model.eval()
     metadata = {k: v for k, v in payload.items() if k != "state_dict"}
     return model, metadata

@@ -72,78 +72,15 @@ import pandas as pd
 import torch
 
 from ifenn.io import progress_bar
-from ifenn.network.picnn import DEFAULT_HISTORY_CAP, PICNN, InputScaling, residual
+from ifenn.network.picnn import PICNN, InputScaling, residual
+from ifenn.network.settings import (  # noqa: F401 (re-exported)
+    DEFAULT_HISTORY_CAP,
+    DEFAULT_SETTINGS,
+    PRESETS,
+    SAMPLINGS,
+    resolve_settings,
+)
 from ifenn.pixels import SlitCuts
-
-DEFAULT_SETTINGS: dict = {
-    "lr": 1e-3,
-    "lr_final": None,
-    "epochs": 5000,
-    "sampling": "full",
-    "padding": "zeros",
-    "laplacian_padding": "zeros",
-    "input_scaling": "none",
-    "input_reference": 1.0,
-    "input_centre": None,
-    "history_cap": DEFAULT_HISTORY_CAP,
-    "channels": (1, 24, 24, 24, 1),
-    "kernel_size": 5,
-    "optimiser": "adam",
-    "residual_scaling": "none",
-    "residual_scaling_exponent": 1.0,
-    "residual_scaling_warmup": 0,
-    "tile_size": 46,
-    "process_zone_history": None,
-    "process_zone_margin": None,
-    "process_zone_tiles": None,
-    "far_field_tiles": 4,
-    "tile_weighting": "count",
-    "full_image_epochs": 0,
-    "dtype": "float32",
-    "log_every": 10,
-}
-
-PRESETS: dict[str, dict] = {
-    "released": {"lr": 1e-3, "epochs": 5000, "sampling": "full"},
-    "text": {"lr": 1e-4, "epochs": 10000, "sampling": "full"},
-    "tiles": {
-        "lr": 1e-3,
-        "lr_final": 1e-5,
-        "epochs": 1000,
-        "sampling": "tiles",
-        "padding": "replicate",
-        "laplacian_padding": "replicate",
-        "input_scaling": "log",
-        "input_reference": 0.01,
-        "residual_scaling": "reaction",
-        "residual_scaling_exponent": 0.5,
-        "tile_size": 30,
-        "process_zone_tiles": 6,
-        "far_field_tiles": 4,
-        "tile_weighting": "count",
-        "full_image_epochs": 0,
-    },
-}
-
-
-SAMPLINGS = ("full", "tiles")
-
-
-def resolve_settings(settings: dict | None = None) -> dict:
-    """DEFAULT_SETTINGS, overridden by ``settings["preset"]`` (if any), then by ``settings``."""
-    settings = dict(settings or {})
-    resolved = dict(DEFAULT_SETTINGS)
-    preset = settings.pop("preset", None)
-    if preset is not None:
-        resolved.update(PRESETS[preset])
-        resolved["preset"] = preset
-    unknown = set(settings) - set(DEFAULT_SETTINGS)
-    if unknown:
-        raise KeyError(f"unknown PICNN training settings: {sorted(unknown)}")
-    resolved.update(settings)
-    if resolved["sampling"] not in SAMPLINGS:
-        raise KeyError(f"PICNN training setting 'sampling': {resolved['sampling']!r}; allowed: {list(SAMPLINGS)}")
-    return resolved
 
 
 # ---------------------------------------------------------------------------------------
@@ -256,6 +193,7 @@ def train_picnn(
     monitor=None,
     monitor_every: int = 100,
     cuts=None,
+    device="cpu",
 ) -> tuple[PICNN, pd.DataFrame]:
     """Train a PICNN on history pixel maps with the physics loss only.
 
@@ -268,22 +206,28 @@ def train_picnn(
     monitor : optional callable model -> dict of numbers, called every ``monitor_every``
         epochs and after the last; its values become extra columns of the log (NaN
         elsewhere). Its time is excluded from wall_s.
-    Returns (trained model in eval mode, loss log with columns epoch, loss, wall_s, stage),
+    device : where the epochs run (a torch device or a setting of :func:`ifenn.device.resolve_device`);
+        the initial weights are drawn on the CPU, so a seed gives the same start on every device.
+    Returns (trained model in eval mode, on the CPU, loss log with columns epoch, loss, wall_s, stage),
     where loss is the loss of that epoch's batch (crops or full images) and wall_s the
     elapsed training time in seconds.
     """
+    from ifenn.device import resolve_device
+
     s = resolve_settings(settings)
+    device = device if isinstance(device, torch.device) else resolve_device(device)
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     was_deterministic = torch.are_deterministic_algorithms_enabled()
     torch.use_deterministic_algorithms(True)
     try:
-        return _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts)
+        model, log = _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts, device)
+        return model.cpu(), log
     finally:
         torch.use_deterministic_algorithms(was_deterministic)
 
 
-def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts=None):
+def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every, cuts=None, device=None):
     """train_picnn with resolved settings ``s``, inside the deterministic-algorithms guard."""
     rng = np.random.default_rng(seed)
     dtype = getattr(torch, s["dtype"])
@@ -302,7 +246,8 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
         ),
     ).to(dtype)
     capped = np.minimum(np.maximum(np.stack(history_maps), 0.0), s["history_cap"])
-    full_history = torch.as_tensor(capped[:, None], dtype=dtype)
+    model.to(device)
+    full_history = torch.as_tensor(capped[:, None], dtype=dtype, device=device)
 
     if s["sampling"] == "tiles":
         pz_history = s["process_zone_history"] if s["process_zone_history"] is not None else Gc / lc
@@ -315,7 +260,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
         n_zone_drawn = zone_idx.size if s["process_zone_tiles"] is None else min(s["process_zone_tiles"], zone_idx.size)
         zone_scale = zone_idx.size / n_zone_drawn if (n_zone_drawn and s["tile_weighting"] == "count") else 1.0
         far_scale = far_idx.size / n_far_drawn if (n_far_drawn and s["tile_weighting"] == "count") else 1.0
-        tile_history, tile_weight = tiles.history.to(dtype), tiles.weight.to(dtype)
+        tile_history, tile_weight = tiles.history.to(device, dtype), tiles.weight.to(device, dtype)
         crop_shape = tuple(tiles.history.shape[-2:])
         tile_cuts = [cuts.crop((slice(cy, cy + crop_shape[0]), slice(cx, cx + crop_shape[1]))) for _, cy, cx in tiles.origins] \
             if cuts else None
@@ -335,7 +280,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
         if crop_stage:
             zone = np.sort(rng.choice(zone_idx, size=n_zone_drawn, replace=False))
             far = np.sort(rng.choice(far_idx, size=n_far_drawn, replace=False))
-            index = torch.as_tensor(np.concatenate([zone, far]))
+            index = torch.as_tensor(np.concatenate([zone, far]), device=device)
             weight = tile_weight[index].clone()
             weight[:n_zone_drawn] *= zone_scale
             weight[n_zone_drawn:] *= far_scale

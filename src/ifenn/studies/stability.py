@@ -169,13 +169,17 @@ def stability_table(config: dict, cell_root: str | Path):
 
 
 # ------------------------------------------------------------------ running one cell
-def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None, model: str | Path | None = None) -> dict:
-    """Run one cell (FEM, or IFENN continuing ``fem_dir``); never raises for a solver
-    failure: status.json says 'ok', 'diverged' (with the error) or 'not started'."""
+def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None, model: str | Path | None = None,
+             device="auto") -> dict:
+    """Run one cell (FEM, or IFENN continuing ``fem_dir``, its network on ``device``); never raises
+    for a solver failure: status.json says 'ok', 'diverged' (with the error) or 'not started'.
+    A bad device setting is refused before the cell starts."""
     import time
 
+    from ifenn.device import network_device
     from ifenn.fem.mesh import build_mesh, write_mesh
 
+    device = network_device(spec, device) if fem_dir is not None else None
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     for stale in (run_files.STATUS, run_files.HISTORY, run_files.FIELDS, "paraview.xdmf", "paraview.h5", run_files.PROVENANCE):
@@ -195,7 +199,7 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
             if fem_status["status"] != "ok":
                 status = {"status": "diverged", "error": f"its FEM cell failed: {fem_status.get('error', '')}"}
             else:
-                run_ifenn(spec, Path(fem_dir) / "mesh.xdmf", fem_dir, model, out_dir, progress=False)
+                run_ifenn(spec, Path(fem_dir) / "mesh.xdmf", fem_dir, model, out_dir, progress=False, device=device)
     except (RuntimeError, FloatingPointError, ValueError, ArithmeticError) as error:
         status = {"status": "diverged", "error": str(error)[:500]}
     status["wall_s"] = time.perf_counter() - started

@@ -1,0 +1,55 @@
+"""Where the network's tensors live: the config's ``device`` (``auto``: CUDA when torch sees
+one, else the CPU; ``cpu``; ``cuda``), resolved once per process and handed to training and
+inference. The FEM stays on PETSc (CPU); the pixel equation's exact solver and the verified
+step's correction are numpy/scipy today (the GPU issue's step 2 moves the correction).
+
+The setting is not part of a run's spec (a spec says what is computed, the device where): a
+run's provenance.json records the device that computed it (:func:`describe`).
+"""
+
+from __future__ import annotations
+
+import os
+
+DEVICES = ("auto", "cpu", "cuda")
+
+
+def resolve_device(setting: str = "auto", key: str = "device"):
+    """The torch device of a ``device`` setting; an unknown value or ``cuda`` without a CUDA
+    device is refused naming ``key``, the value and what is allowed."""
+    import torch
+
+    if setting not in DEVICES:
+        raise ValueError(f"config key '{key}': {setting!r}; allowed: {list(DEVICES)}")
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"config key '{key}': 'cuda', but torch {torch.__version__} sees no CUDA device; "
+                         "allowed here: 'auto' or 'cpu'")
+    if setting == "auto":
+        setting = "cuda" if torch.cuda.is_available() else "cpu"
+    if setting == "cuda":
+        # deterministic cuBLAS (training runs under torch.use_deterministic_algorithms)
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    return torch.device(setting)
+
+
+def describe(device) -> str:
+    """A device in words for provenance and figure labels: 'cpu' or 'cuda (NVIDIA H200)'."""
+    import torch
+
+    device = torch.device(device)
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    return device.type
+
+
+def network_device(spec: dict, device="auto"):
+    """The torch device of a run whose predictor is the network (``device`` resolved once, here,
+    and handed down); None for the other predictors, which then never import torch."""
+    if spec.get("predictor") != "picnn":
+        return None
+    return resolve_device(device) if isinstance(device, str) else device
+
+
+def device_record(device) -> dict:
+    """provenance.json's record of where the network ran ({} without a network)."""
+    return {} if device is None else {"network_device": describe(device)}
