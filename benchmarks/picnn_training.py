@@ -16,8 +16,11 @@ Falls back to a synthetic stand-in (``ifenn.network.training.synthetic_history``
 exact pixel solution) when the FEM fields do not exist. Timing is honest wall time on this
 machine with --threads torch threads; other jobs running at the same time slow it down.
 
+Every preset trains on each device of --devices (default: the CPU, and CUDA where torch sees
+one), side by side in one table (column ``device``, by name).
+
     .venv/bin/python benchmarks/picnn_training.py [--fields results/fem/snt1-I/fields.h5]
-        [--increments 300 310] [--threads 2] [--short-epochs 200] [--presets ...] [--csv out.csv]
+        [--increments 300 310] [--threads 2] [--short-epochs 200] [--presets ...] [--devices cpu cuda] [--csv out.csv]
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.config import REPO, load_config
+from ifenn.device import describe, resolve_device
 from ifenn.network.picnn import solve_pixel_equation
 from ifenn.network.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
 
@@ -68,8 +72,13 @@ def main() -> None:
     parser.add_argument("--short-epochs", type=int, default=200, help="epochs run for released/text")
     parser.add_argument("--checkpoints", type=int, default=5, help="accuracy rows per preset")
     parser.add_argument("--presets", nargs="+", default=["tiles", "released", "text"], choices=list(PRESETS))
+    parser.add_argument("--devices", nargs="+", default=None, choices=["cpu", "cuda"],
+                        help="where to train (default: cpu, and cuda where torch sees one)")
     parser.add_argument("--csv", type=Path, default=None, help="also write the table here")
     args = parser.parse_args()
+    import torch
+
+    devices = [resolve_device(d, "--devices") for d in (args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else []))]
 
     material = load_config(REPO / "config/config.yaml")["material"]
     Gc, lc = material["Gc"], material["lc"]
@@ -83,7 +92,7 @@ def main() -> None:
         source = "SYNTHETIC stand-in (no FEM fields found); reference = exact pixel solution"
 
     rows = []
-    for preset in args.presets:
+    for device, preset in ((device, preset) for device in devices for preset in args.presets):
         settings = resolve_settings({"preset": preset})
         full_epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "tiles" else 0)
         short = preset != "tiles"
@@ -97,18 +106,19 @@ def main() -> None:
         started = time.perf_counter()
         _, log = train_picnn(
             history_maps, h_px, Gc, lc, settings, seed=args.seed, threads=args.threads, progress=True,
-            monitor=monitor, monitor_every=max(run_epochs // args.checkpoints, 1),
+            monitor=monitor, monitor_every=max(run_epochs // args.checkpoints, 1), device=device,
         )
-        print(f"{preset}: {run_epochs} epochs, {time.perf_counter() - started:.1f} s including scoring")
+        print(f"{preset} on {describe(device)}: {run_epochs} epochs, {time.perf_counter() - started:.1f} s including scoring")
         checkpoints = log.dropna(subset=["mae_all_0"]).copy()
         checkpoints.insert(0, "preset", preset)
+        checkpoints.insert(0, "device", describe(device))
         checkpoints["epochs_of_preset"] = full_epochs
         per_epoch = log.wall_s.iloc[-1] / len(log)
         checkpoints["extrapolated_wall_s"] = per_epoch * full_epochs if short else np.nan
         rows.append(checkpoints)
 
     table = pd.concat(rows, ignore_index=True)
-    columns = ["preset", "epoch", "wall_s", "extrapolated_wall_s"]
+    columns = ["device", "preset", "epoch", "wall_s", "extrapolated_wall_s"]
     for k in range(len(history_maps)):
         columns += [f"mae_all_{k}", f"mae_crack_{k}", f"mae_pixel_exact_{k}", f"max_phi_{k}"]
     pd.set_option("display.width", 250)

@@ -26,6 +26,7 @@ rule adaptive:
         provenance="results/adaptive/{run}/provenance.json",
     params:
         python=PYTHON,
+        device=config["device"],  # where the network runs (ifenn.device)
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         out=lambda w, output: os.path.dirname(output.history),
     threads: 1
@@ -39,7 +40,7 @@ rule adaptive:
     benchmark:
         "benchmarks/adaptive/{run}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} {params.model} --out {params.out} > {log} 2>&1"
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} {params.model} --device {params.device} --out {params.out} > {log} 2>&1"
 
 
 rule adaptive_resolution:

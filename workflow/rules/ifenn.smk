@@ -29,6 +29,7 @@ rule ifenn:
         provenance="results/ifenn/{run}/provenance.json",
     params:
         python=PYTHON,
+        device=config["device"],  # where the network runs (ifenn.device)
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         # a whole-path run (switch_over 'start') gets its FEM run's folder too, and does not read it
         fem_dir=lambda w, input: (os.path.dirname(input.fem_history) if "fem_history" in input.keys()
@@ -45,7 +46,7 @@ rule ifenn:
     benchmark:
         "benchmarks/ifenn/{run}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.python} -m ifenn ifenn --spec {input.spec} --mesh {input.mesh}"
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn ifenn --spec {input.spec} --mesh {input.mesh} --device {params.device}"
         " --fem-dir {params.fem_dir} {params.model} --out {params.out} > {log} 2>&1"
 
 

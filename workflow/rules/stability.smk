@@ -26,6 +26,7 @@ rule stability_cell:
         "results/stability/{cell}/status.json",
     params:
         python=PYTHON,
+        device=config["device"],  # where the network runs (ifenn.device)
         fem=lambda w, input: f"--fem-dir {os.path.dirname(input.fem_status)}" if "fem_status" in input.keys() else "",
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         out=lambda w, output: os.path.dirname(output[0]),
@@ -42,7 +43,7 @@ rule stability_cell:
     benchmark:
         "benchmarks/stability/{cell}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.python} -m ifenn cell --spec {input.spec} --out {params.out}"
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn cell --spec {input.spec} --device {params.device} --out {params.out}"
         " {params.fem} {params.model} > {log} 2>&1"
 
 
