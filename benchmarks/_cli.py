@@ -12,7 +12,7 @@ from ifenn.config import REPO, ifenn_run_spec, load_config
 
 
 def parser(doc: str, section: str, out: str, increments_help: str) -> argparse.ArgumentParser:
-    """--config, --model, --specs (default: ``section``.runs of --config), --increments, --out."""
+    """--config, --model, --specs (default: ``section``.runs of --config), --increments, --out, --devices."""
     cli = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     cli.add_argument("--config", nargs="+", default=[str(REPO / "config" / "config.yaml")])
     cli.add_argument("--model", default="results/picnn/model.pt")
@@ -21,7 +21,16 @@ def parser(doc: str, section: str, out: str, increments_help: str) -> argparse.A
     cli.add_argument("--results", default="results", help="the workflow's results folder: meshes in mesh/, FEM runs in fem/")
     cli.add_argument("--increments", type=int, default=None, help=increments_help)
     cli.add_argument("--out", default=out)
+    cli.add_argument("--devices", nargs="+", default=None, choices=["cpu", "cuda"],
+                     help="where the network's methods run, side by side (default: cpu, and cuda where torch sees one)")
     return cli
+
+
+def devices(args: argparse.Namespace):
+    """The torch devices of --devices (None: ifenn.device.default_devices)."""
+    from ifenn.device import resolve_device
+
+    return None if args.devices is None else [resolve_device(d, "--devices") for d in args.devices]
 
 
 def run_inputs(specs: list[dict], results: str | Path) -> dict[str, dict]:

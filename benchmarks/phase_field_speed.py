@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 
 import pandas as pd
-from _cli import parser, run_inputs, setup
+from _cli import devices, parser, run_inputs, setup
 
 from ifenn.studies.benchmark import phase_field_speed
 
@@ -27,12 +27,12 @@ def main() -> int:
     zone = json.loads(args.process_zone) if args.process_zone else config["ifenn"]["process_zone"]
     verification = json.loads(args.verification) if args.verification else config["ifenn"]["verification"]
     table = phase_field_speed(specs, run_inputs(specs, args.results), zone, args.model, args.increments or setup_section["increments"],
-                              verification=verification)
+                              verification=verification, devices=devices(args))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     with pd.option_context("display.width", 200, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
         print("\nPhase-field step, seconds per increment (mean over the increments after the switch-over):")
-        print(table[["run", "pixels", "method", "network_kernel", "increments", "t_displacement_s", "t_phase_field_s", "t_phase_field_median_s",
+        print(table[["run", "pixels", "method", "device", "network_kernel", "increments", "t_displacement_s", "t_phase_field_s", "t_phase_field_median_s",
                      "evaluated_fraction", "t_verify_s", "verify_corrected_fraction", "phase_field_speedup_vs_fem", "final_force"]].to_string(index=False))
     return 0
 

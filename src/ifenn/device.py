@@ -53,3 +53,10 @@ def network_device(spec: dict, device="auto"):
 def device_record(device) -> dict:
     """provenance.json's record of where the network ran ({} without a network)."""
     return {} if device is None else {"network_device": describe(device)}
+
+
+def default_devices() -> list:
+    """The devices a benchmark compares side by side: the CPU, and CUDA where torch sees one."""
+    import torch
+
+    return [torch.device("cpu")] + ([resolve_device("cuda")] if torch.cuda.is_available() else [])

@@ -13,6 +13,7 @@ rule error_sources:
         cases=error_sources_cases,
         stagger_max_iterations=lambda w: config["error_sources"]["stagger_max_iterations"],
         crack_phi=lambda w: config["error_sources"]["crack_phi"],
+        device=config["device"],  # where the network runs (ifenn.device)
     threads: 1
     resources:
         mem_mb=6000,

@@ -15,6 +15,7 @@ rule whole_path_table:
         runs=lambda w: whole_path_dirs(),
         network_cases=lambda w: whole_path_network_cases(),
         targets=lambda w: config["whole_path"]["targets"],
+        device=config["device"],  # where the network runs (ifenn.device)
     threads: 1
     conda:
         "../envs/ifenn.yaml"

@@ -14,7 +14,8 @@ from ifenn.studies.error_sources import error_sources  # noqa: E402
 from ifenn.studies.plots import error_sources_figure  # noqa: E402
 
 torch.set_num_threads(snakemake.threads)
-sources, states = error_sources(snakemake.params.cases, snakemake.params.stagger_max_iterations, snakemake.params.crack_phi)
+sources, states = error_sources(snakemake.params.cases, snakemake.params.stagger_max_iterations, snakemake.params.crack_phi,
+                                snakemake.params.device)
 write_csv(snakemake.output.states, states)
 write_csv(snakemake.output.table, sources)
 error_sources_figure(sources, snakemake.output.figure)

@@ -16,7 +16,8 @@ table = whole_path_table(runs, snakemake.params.targets)
 write_csv(snakemake.output.table, table)
 frames = []
 for run, case in snakemake.params.network_cases.items():
-    frames.append(network_before_nucleation(read_spec(case["spec"]), case["fem_fields"], case["model"], pd.read_csv(case["history"]))
+    frames.append(network_before_nucleation(read_spec(case["spec"]), case["fem_fields"], case["model"], pd.read_csv(case["history"]),
+                                            device=snakemake.params.device)
                   .assign(run=run, fem_run=runs[run]["fem_run"]))
 network = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=["run", "fem_run", "increment"])
 write_csv(snakemake.output.network, network[["run", "fem_run", *[c for c in network.columns if c not in ("run", "fem_run")]]])

@@ -11,6 +11,10 @@ For each scene and method the run restarts from the same FEM state and takes the
 only the phase-field step differs. t_phase_field_s is everything that step does: for FEM the
 assembly and solve (and the evaluation at the Gauss points), for IFENN the Gauss point ->
 pixel conversion, capping, inference, smoothing, back-projection and irreversibility.
+
+Every IFENN method runs once per device of ``devices`` (the CPU, and CUDA where torch sees one:
+column ``device``, by name; on a GPU the network runs as its convolutions, ``network_kernel``
+conv2d). FEM runs once, on PETSc (``device`` cpu).
 """
 
 from __future__ import annotations
@@ -35,7 +39,8 @@ METHODS = {"fem": None, "ifenn_full_convolution": {"inference": "full", "evaluat
            "ifenn_verified_nonet": {**_VERIFIED, "verification": {"warm_start": "previous"}}}
 
 
-def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path) -> pd.DataFrame:
+def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: str, increments: int, work: Path,
+         device=None) -> pd.DataFrame:
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.phase_field import FEMPhaseField
     from ifenn.fem.problem import FractureProblem
@@ -44,7 +49,7 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
 
     switch, state, rows = switch_state(fem_dir)
     spec = copy.deepcopy(spec)
-    spec.update(name=f"{spec['name']}-{method}", load=spec["load"][: switch + increments], save_fields=[], checkpoint_every=10**6)
+    spec.update(name=f"{spec['name']}-{method}-{getattr(device, 'type', 'cpu')}", load=spec["load"][: switch + increments], save_fields=[], checkpoint_every=10**6)
     overrides = copy.deepcopy(METHODS[method])
     if overrides:
         if "verification" in overrides:
@@ -58,7 +63,7 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
     if method == "fem":
         step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
     else:
-        step = pixel_phase_field(spec, problem, model_path)
+        step = pixel_phase_field(spec, problem, model_path, device=device)
         kernel = step.inference.kernel
     start = {"increment": switch, "state": state, "rows": rows}
     run = StaggeredRun(problem, step, spec, work / spec["name"], progress=False, start=start,
@@ -68,23 +73,28 @@ def _run(spec: dict, mesh_path: Path, fem_dir: Path, model_path: Path, method: s
 
 
 def phase_field_speed(specs: list[dict], inputs: dict[str, dict], process_zone: dict, model_path: str | Path, increments: int = 40,
-                      verification: dict | None = None) -> pd.DataFrame:
+                      verification: dict | None = None, devices=None) -> pd.DataFrame:
     """One row per (IFENN run spec, method): mean seconds per increment of the displacement
     solve, the phase-field step and the increment, the fraction of pixels the network
     evaluated, and the phase-field step's speed-up over FEM's. ``process_zone``: the settings
     of the process-zone method (config 'ifenn.process_zone'); ``verification``: those of the
     verified methods (config 'ifenn.verification'; ``enabled`` is set by the method).
-    ``inputs``: per run name, its scene's ``mesh`` (XDMF) and its FEM run's ``fem_dir``."""
+    ``inputs``: per run name, its scene's ``mesh`` (XDMF) and its FEM run's ``fem_dir``; ``devices``:
+    where the IFENN methods run (default :func:`ifenn.device.default_devices`)."""
+    from ifenn.device import default_devices, describe
+
+    devices = default_devices() if devices is None else devices
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
             spec = {**spec, "process_zone": spec.get("process_zone") or process_zone,
                     "verification": spec.get("verification") or verification or {}}
             fem_dir, mesh = Path(inputs[spec["name"]]["fem_dir"]), Path(inputs[spec["name"]]["mesh"])
-            for method in METHODS:
-                history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp))
+            for method, device in [(m, d) for m in METHODS for d in ([None] if METHODS[m] is None else devices)]:
+                history = _run(spec, mesh, fem_dir, Path(model_path), method, increments, Path(tmp), device)
                 nx, ny = spec["scene"]["elements"]
                 rows.append({"run": spec["name"], "elements": f"{nx}x{ny}", "pixels": f"{2 * nx}x{2 * ny}", "method": method,
+                             "device": "cpu" if device is None else describe(device),
                              "network_kernel": history.network_kernel.iloc[0],
                              "increments": len(history),
                              "t_displacement_s": history.t_displacement_s.mean(),

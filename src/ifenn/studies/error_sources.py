@@ -142,7 +142,8 @@ class Replay:
     crack is formed (phi_FEM >= this), for ``crack_band_min``.
     """
 
-    def __init__(self, spec: dict, mesh_path, model_path, stagger_max_iterations: int = 50, crack_phi: float = 0.95):
+    def __init__(self, spec: dict, mesh_path, model_path, stagger_max_iterations: int = 50, crack_phi: float = 0.95,
+                 device="auto"):
         from mpi4py import MPI
 
         from ifenn.fem.mesh import read_dolfinx_mesh
@@ -166,8 +167,8 @@ class Replay:
         shape = self.problem.pixels.shape
         self.network_smoothed = self.network_raw = None
         if model_path is not None:
-            self.network_smoothed = make_inference(published, model_path, self.h_px, shape)
-            self.network_raw = make_inference({**published, "smoothing_sigma": None}, model_path, self.h_px, shape)
+            self.network_smoothed = make_inference(published, model_path, self.h_px, shape, device)
+            self.network_raw = make_inference({**published, "smoothing_sigma": None}, model_path, self.h_px, shape, device)
 
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
@@ -285,17 +286,21 @@ def attribute(states: pd.DataFrame, fields: dict | None = None) -> list[dict]:
     return rows
 
 
-def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi: float = 0.95) -> tuple[pd.DataFrame, pd.DataFrame]:
+def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi: float = 0.95,
+                  device="auto") -> tuple[pd.DataFrame, pd.DataFrame]:
     """The error split of each IFENN run in ``cases``.
 
     A case is a dict of paths: ``spec`` (the IFENN run's spec.json), ``mesh`` (the scene's XDMF),
     ``fem_dir`` (its FEM run: fields.h5, history.csv), ``ifenn_history`` (the published IFENN
     run's history.csv, for the whole-run context; absent or None: those columns are nan) and
-    ``model`` (the trained PICNN; absent or None: no network variants).
+    ``model`` (the trained PICNN; absent or None: no network variants); ``device``: where the network
+    runs (:mod:`ifenn.device`).
     Returns (sources, states): one row per run and source (attribute() columns + the run's
     post-switch context, postswitch_error()), and one row per run, replayed state and variant
     (Replay.replay columns). Fractions of the FEM peak, see the module docstring.
     """
+    from ifenn.device import network_device
+
     source_rows, state_rows = [], []
     for case in cases:
         spec = run_files.read_spec(case["spec"])
@@ -315,7 +320,7 @@ def error_sources(cases: list[dict], stagger_max_iterations: int = 50, crack_phi
         if not states:
             raise ValueError(f"FEM run {fem_dir} saved no state after its switch-over increment {switch}: nothing to replay")
         log.info("%s: %d FEM states after the switch-over increment %d", spec["name"], len(states), switch)
-        replay = Replay(spec, case["mesh"], case.get("model"), stagger_max_iterations, crack_phi)
+        replay = Replay(spec, case["mesh"], case.get("model"), stagger_max_iterations, crack_phi, network_device(spec, device))
         recorded = fem_history.set_index("increment").reaction_force
         run_rows, run_fields = [], {}
         for state in states:

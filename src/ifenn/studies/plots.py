@@ -394,8 +394,10 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
     if benchmark is not None and len(benchmark):
         names = {"ifenn_full_convolution": "full image, convolutions (the paper)", "ifenn_full": "full image, orbit evaluation",
                  "ifenn_process_zone": "process zone"}
-        ranges = [f"{label} {g.min():.2g}-{g.max():.2g}x" for method, label in names.items()
-                  if len(g := benchmark[benchmark.method == method].phase_field_speedup_vs_fem)]
+        devices = benchmark.device if "device" in benchmark else benchmark.method.map(lambda _: "cpu")
+        ranges = [f"{label}{'' if device == 'cpu' else f' on {device}'} {g.min():.2g}-{g.max():.2g}x"
+                  for device in dict.fromkeys(devices) for method, label in names.items()
+                  if len(g := benchmark[(benchmark.method == method) & (devices == device)].phase_field_speedup_vs_fem)]
         title += ("\nIFENN phase-field step against the FEM one it replaces, same core (phase_field_speed.csv, "
                   f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
     fig.suptitle(title, fontsize=9)
@@ -494,30 +496,37 @@ def whole_path_figure(pairs: dict, table, path) -> None:
 
 
 def whole_run_speed_figure(increments, summary, path) -> None:
-    """The phase-field step over the whole run, FEM against whole-path IFENN, one process and one
-    core (ifenn.studies.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
-    (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked."""
+    """The phase-field step over the whole run, FEM against whole-path IFENN, one process
+    (ifenn.studies.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
+    (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked. IFENN
+    is drawn once per device it ran on (column ``device``, labelled by name)."""
+    if "device" not in increments:
+        increments, summary = increments.assign(device="cpu"), summary.assign(device="cpu")
     runs = list(dict.fromkeys(increments.run))
     fig, axes = plt.subplots(2, len(runs), figsize=(4.2 * len(runs), 6.4), squeeze=False, sharex="col")
-    colours = {"fem": "k", "ifenn": "tab:red"}
-    labels = {"fem": "FEM (Q1 solve)", "ifenn": "IFENN, whole path (verified)"}
-    rows = summary.set_index(["run", "method"])
+    ifenn_colours = ["tab:red", "tab:green", "tab:purple"]
+    rows = summary.set_index(["run", "method", "device"])
+    series = list(dict.fromkeys(zip(increments.method, increments.device, strict=True)))
+    series = [key for key in series if key[0] == "fem"] + [key for key in series if key[0] != "fem"]
     for k, run in enumerate(runs):
-        for method in ("fem", "ifenn"):
-            frame = increments[(increments.run == run) & (increments.method == method)]
+        for index, (method, device) in enumerate(series):
+            frame = increments[(increments.run == run) & (increments.method == method) & (increments.device == device)]
             if frame.empty:
                 continue
-            axes[0, k].plot(frame.u, frame.t_phase_field_s, color=colours[method], lw=0.6, alpha=0.8, label=labels[method])
-            axes[1, k].plot(frame.u, frame.t_phase_field_s.cumsum(), color=colours[method], lw=1.2, label=labels[method])
+            colour = "k" if method == "fem" else ifenn_colours[(index - 1) % len(ifenn_colours)]
+            label = "FEM (Q1 solve, PETSc, CPU)" if method == "fem" else f"IFENN, whole path (verified), network on {device}"
+            axes[0, k].plot(frame.u, frame.t_phase_field_s, color=colour, lw=0.6, alpha=0.8, label=label)
+            axes[1, k].plot(frame.u, frame.t_phase_field_s.cumsum(), color=colour, lw=1.2, label=label)
         fem = increments[(increments.run == run) & (increments.method == "fem")]
-        switch = int(rows.loc[(run, "fem")].fem_switch_increment)
+        fem_row = rows.loc[run, "fem"].iloc[0]
+        switch = int(fem_row.fem_switch_increment)
         if switch <= len(fem):
             u_switch = float(fem.u[fem.increment == switch].iloc[0])
             for ax in axes[:, k]:
                 ax.axvline(u_switch, color="tab:blue", lw=0.6, ls=":")
-        speedup = rows.loc[(run, "ifenn")].phase_field_speedup_vs_fem
-        axes[0, k].set_title(f"{run} ({rows.loc[(run, 'fem')].elements} elements)\n"
-                             f"FEM / IFENN phase-field time over the run: {speedup:.2f}x", fontsize=8)
+        speedups = ", ".join(f"{row.phase_field_speedup_vs_fem:.2f}x ({device})" for device, row in rows.loc[run, "ifenn"].iterrows())
+        axes[0, k].set_title(f"{run} ({fem_row.elements} elements)\n"
+                             f"FEM / IFENN phase-field time over the run: {speedups}", fontsize=8)
         axes[0, k].set_yscale("log")
         axes[0, k].set_ylabel("phase-field step (s)" if k == 0 else "")
         axes[1, k].set_ylabel("cumulative phase-field time (s)" if k == 0 else "")
@@ -525,7 +534,7 @@ def whole_run_speed_figure(increments, summary, path) -> None:
         axes[0, k].grid(True, which="both", alpha=0.3)
         axes[1, k].grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Phase-field step over the whole run, same core, same process, increments interleaved "
+    fig.suptitle("Phase-field step over the whole run, same process, increments interleaved "
                  "(dotted: FEM's phi_max > switch threshold)", fontsize=9)
     fig.tight_layout()
     _save(fig, path)

@@ -103,7 +103,7 @@ def whole_path_table(runs: dict[str, dict], targets: dict | None = None) -> pd.D
 
 
 def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: str | Path, ifenn_history: pd.DataFrame | None = None,
-                              after: int = 2) -> pd.DataFrame:
+                              after: int = 2, device="auto") -> pd.DataFrame:
     """The FEM run's saved states before its switch-over increment (and ``after`` saved states
     from it on, for contrast), each H capped and passed through the network (full image, the
     run's evaluation, no smoothing) and the exact pixel solve. Per state: u, FEM's max phi, the
@@ -111,7 +111,8 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     network's largest and mean |phi - exact|, its mean error where exact < 0.1 (the far field),
     its largest normalised residual max |r| (the check's quantity; >= the largest error) and the
     share of pixels with |r| above the verification tolerance. With ``ifenn_history`` (the
-    whole-path run's), its verified step's record at that increment is added."""
+    whole-path run's), its verified step's record at that increment is added. ``device``: where the
+    network runs (:mod:`ifenn.device`)."""
     from ifenn.hybrid.runs import _network_inference, slit_cuts
     from ifenn.hybrid.verification import PixelEquation
     from ifenn.network.picnn import solve_pixel_equation
@@ -127,7 +128,7 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
               for s in run_files.read_states(fem_fields, before + later, keys=run_files.MAP_KEYS)}
     cuts = slit_cuts(spec)
     equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], cuts)
-    network = _network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape)
+    network = _network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape, device)
     rows = []
     for k, (u, history, phi_fem) in states.items():
         capped = np.clip(history, 0.0, spec["history_cap"])

@@ -8,6 +8,8 @@ increments, IFENN then FEM on even ones), so both see the same machine load over
 only the phase-field step differs in what they compute. ``t_phase_field_s`` is everything
 the step does (FEM: assembly, solve, evaluation at the Gauss points; IFENN: Gauss points ->
 pixels, cap, network, check and correction, pixels -> Gauss points). Fixed schedules only.
+The IFENN run is repeated on each device of ``devices`` (the CPU, and CUDA where torch sees one:
+column ``device``; FEM's row says cpu, PETSc's); all runs are interleaved, in rotating order.
 """
 
 from __future__ import annotations
@@ -26,8 +28,10 @@ INCREMENT_COLUMNS = ["increment", "u", "reaction_force", "phi_max", "t_displacem
                      "t_inference_s", "t_verify_s", "verify_corrected_fraction", "verify_solve_work"]
 
 
-def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
-    """The FEM run and the whole-path IFENN run of ``spec``, each a StaggeredRun at its initial state."""
+def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path, devices) -> dict:
+    """(method, device) -> StaggeredRun at the initial state: the FEM run and the whole-path IFENN
+    run of ``spec`` on each of ``devices``."""
+    from ifenn.device import describe
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.phase_field import FEMPhaseField
     from ifenn.fem.problem import FractureProblem
@@ -35,55 +39,61 @@ def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path) -> dict:
     from ifenn.hybrid.runs import pixel_phase_field
 
     runs = {}
-    for method in ("fem", "ifenn"):
+    for method, device in [("fem", None)] + [("ifenn", device) for device in devices]:
         domain = read_dolfinx_mesh(mesh_path)
         problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"])
         if method == "fem":
             step = FEMPhaseField(problem, spec["petsc"]["phase_field"])
         else:
-            step = pixel_phase_field(spec, problem, model_path)
-        run_spec = {**copy.deepcopy(spec), "name": f"{spec['name']}-{method}", "save_fields": [], "checkpoint_every": 10**9}
-        runs[method] = StaggeredRun(problem, step, run_spec, work / run_spec["name"], progress=False,
-                                    row_constants={"hybrid_active": 1} if method == "ifenn" else None)
+            step = pixel_phase_field(spec, problem, model_path, device=device)
+        name = "cpu" if device is None else describe(device)
+        run_spec = {**copy.deepcopy(spec), "name": f"{spec['name']}-{method}-{name.split()[0]}", "save_fields": [], "checkpoint_every": 10**9}
+        runs[method, name] = StaggeredRun(problem, step, run_spec, work / run_spec["name"], progress=False,
+                                          row_constants={"hybrid_active": 1} if method == "ifenn" else None)
     return runs
 
 
 def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str | Path,
-                    increments: int | None = None, progress: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+                    increments: int | None = None, progress: bool = True, devices=None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(summary, per-increment table). ``specs``: whole-path IFENN run specs (``switch_over``
     'start', a fixed schedule); ``increments``: the first increments of each schedule (None: all).
     Summary, one row per (run, method): increments, total / mean / median phase-field seconds,
     the totals before FEM's phi-threshold increment (pre-nucleation) and from it on
     (propagation), displacement and increment totals, the final force, and FEM's phase-field
-    total over the method's (``phase_field_speedup_vs_fem``, > 1 = faster than FEM)."""
+    total over the method's (``phase_field_speedup_vs_fem``, > 1 = faster than FEM). ``devices``:
+    where the IFENN run is repeated (default :func:`ifenn.device.default_devices`)."""
+    from ifenn.device import default_devices
+
+    devices = default_devices() if devices is None else devices
     summary, per_increment = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
             if spec.get("switch_over") != "start" or "load" not in spec:
                 raise ValueError(f"run {spec['name']}: the whole-run benchmark needs switch_over 'start' and a fixed schedule")
             loads = spec["load"][:increments] if increments else spec["load"]
-            runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp))
+            runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp), devices)
             bar = None
             if progress:
                 bar = progress_bar(total=len(loads), desc=f"{spec['name']} (FEM + IFENN)")
             u_previous = 0.0
             for k, u in enumerate(loads, start=1):
-                order = ("fem", "ifenn") if k % 2 else ("ifenn", "fem")
-                for method in order:
-                    runs[method].rows.append(runs[method].solve_increment(k, u, u_previous))
+                keys = list(runs)
+                for key in keys[k % len(keys):] + keys[:k % len(keys)]:
+                    runs[key].rows.append(runs[key].solve_increment(k, u, u_previous))
                 u_previous = u
                 if bar is not None:
                     bar.update(1)
             if bar is not None:
                 bar.close()
-            histories = {method: pd.DataFrame(run.rows) for method, run in runs.items()}
-            over = histories["fem"].increment[histories["fem"].phi_max > spec["switch_phi_max"]]
+            histories = {key: pd.DataFrame(run.rows) for key, run in runs.items()}
+            fem_history = histories["fem", "cpu"]
+            over = fem_history.increment[fem_history.phi_max > spec["switch_phi_max"]]
             nucleation = int(over.iloc[0]) if len(over) else len(loads) + 1
-            for method, history in histories.items():
+            for (method, device), history in histories.items():
                 frame = history.reindex(columns=INCREMENT_COLUMNS)
-                per_increment.append(frame.assign(run=spec["name"], fem_run=spec["fem_run"], method=method))
+                per_increment.append(frame.assign(run=spec["name"], fem_run=spec["fem_run"], method=method, device=device))
                 pre = history.increment < nucleation
-                summary.append({"run": spec["name"], "fem_run": spec["fem_run"], "method": method,
+                summary.append({"run": spec["name"], "fem_run": spec["fem_run"], "method": method, "device": device,
                                 "elements": "x".join(map(str, spec["scene"]["elements"])), "increments": len(history),
                                 "fem_switch_increment": nucleation,
                                 "t_phase_field_total_s": history.t_phase_field_s.sum(),
@@ -104,5 +114,5 @@ def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str 
                          ("t_increment_total_s", "increment_speedup_vs_fem")):
         table[name] = table.run.map(fem[column]) / table[column]
     increments_table = pd.concat(per_increment, ignore_index=True)
-    lead = ["run", "fem_run", "method"]
+    lead = ["run", "fem_run", "method", "device"]
     return table, increments_table[lead + [c for c in increments_table.columns if c not in lead]]
