@@ -112,3 +112,17 @@ def test_a_second_writer_refuses_at_once_naming_the_holder(quick_spec, tmp_path)
         holder.wait()
     with exclusive_writer(run_dir):  # the system released the killed holder's lock
         pass
+
+
+def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
+    """stage-times: per stage the jobs, their summed and longest wall time; the bound on N cores is
+    the summed wall over N or the longest job, whichever is larger."""
+    from ifenn.studies.stage_times import stage_times, wall_bound
+
+    for stage, job, seconds in (("fem", "a", 100.0), ("fem", "b", 300.0), ("ifenn", "c", 50.0)):
+        (tmp_path / "benchmarks" / stage).mkdir(parents=True, exist_ok=True)
+        (tmp_path / "benchmarks" / stage / f"{job}.tsv").write_text(f"s\tcpu_time\n{seconds}\t{seconds / 2}\n")
+    table = stage_times(tmp_path).set_index("stage")
+    assert table.loc["fem", "jobs"] == 2 and table.loc["fem", "wall_s"] == 400.0 and table.loc["fem", "longest_job"] == "fem/b"
+    assert table.loc["total", "wall_s"] == 450.0 and table.loc["total", "cpu_s"] == 225.0
+    assert wall_bound(table.reset_index(), 2) == 300.0 and wall_bound(table.reset_index(), 1) == 450.0

@@ -6,7 +6,7 @@
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt] [--device D]   (stability sweep)
 
 --device (auto, cpu, cuda; default auto: CUDA when torch sees one): where the network runs.
-  python -m ifenn stage-times [WORKDIR]   what a workflow run spent per stage (its benchmark files)
+  python -m ifenn stage-times [WORKDIR] [--cores N]   what a workflow run spent per stage (its benchmark files)
 """
 
 from __future__ import annotations
@@ -49,11 +49,14 @@ def main(argv=None) -> int:
     cell.add_argument("--device", default="auto", choices=DEVICES, help="where the network runs (config 'device'; default auto)")
     times = sub.add_parser("stage-times", help="sum the workflow's benchmark files (benchmarks/<stage>/*.tsv) by stage")
     times.add_argument("workdir", nargs="?", default=".", help="the workflow's working directory (default: here)")
+    times.add_argument("--cores", type=int, default=2, help="cores of the wall-time bound printed below the table (default 2)")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import stage_times
+        from ifenn.studies.stage_times import stage_times, wall_bound
 
-        print(stage_times(args.workdir).to_markdown(index=False))
+        table = stage_times(args.workdir)
+        print(table.to_markdown(index=False))
+        print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores) / 60:.1f} min (summed wall / cores, or the longest job)")
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):

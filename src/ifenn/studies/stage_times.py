@@ -36,3 +36,11 @@ def stage_times(workdir: str | Path) -> pd.DataFrame:
     total = {"stage": "total", "jobs": int(table.jobs.sum()), "wall_s": table.wall_s.sum(), "cpu_s": table.cpu_s.sum(),
              "longest_s": jobs.wall_s.max(), "longest_job": jobs.job[jobs.wall_s.idxmax()]}
     return pd.concat([table, pd.DataFrame([total])], ignore_index=True).round({"wall_s": 1, "cpu_s": 1, "longest_s": 1})
+
+
+def wall_bound(table: pd.DataFrame, cores: int) -> float:
+    """A lower bound of the workflow's wall time on ``cores`` cores, seconds: the jobs' summed wall
+    time shared perfectly, or the longest job, whichever is larger (every job here uses one core;
+    dependencies can only lengthen it)."""
+    total = table[table.stage == "total"].iloc[0]
+    return max(float(total.wall_s) / cores, float(total.longest_s))
