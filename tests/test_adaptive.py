@@ -256,9 +256,10 @@ def test_adaptive_finer_reference_is_nearer_the_next_uniform_mesh(adaptive_and_f
     assert finer_reference_runs(config)["snt1-II-fine"] == "snt1-II-fine-adaptive"
     assert config["adaptive_runs"]["snt1-II-fine-adaptive"]["adaptive_mesh"] == {"pixels_per_fine_cell": 2}
     spec = adaptive_run_spec(config, "snt1-II-fine-adaptive")
-    reference = pd.DataFrame(run_adaptive(spec, tmp_path_factory.mktemp("finer") / "run", progress=False))
-    *_, quarter = quick_fem_run(config, tmp_path_factory, "snt1-II-quarter", "quarter")
-    _, _, _, half = adaptive_and_fine
+    reference_dir = tmp_path_factory.mktemp("finer") / "adaptive" / "snt1-II-fine-adaptive"   # the workflow's layout
+    reference = pd.DataFrame(run_adaptive(spec, reference_dir, progress=False))
+    quarter_spec, quarter_tmp, quarter = quick_fem_run(config, tmp_path_factory, "snt1-II-quarter", "quarter")
+    adaptive_spec, adaptive_dir, _, half = adaptive_and_fine
 
     def errors(history):
         u, f = history.u.to_numpy(), np.abs(history.reaction_force.to_numpy())
@@ -267,3 +268,17 @@ def test_adaptive_finer_reference_is_nearer_the_next_uniform_mesh(adaptive_and_f
 
     (peak_a, rms_a), (peak_u, rms_u) = errors(reference), errors(half)
     assert peak_a < peak_u and rms_a < 0.5 * rms_u, (peak_a, peak_u, rms_a, rms_u)
+
+    # the table and figure of adaptive_resolution with an adaptive finer reference (the paper
+    # config's default): its dofs are drawn against the finer uniform mesh's too
+    from ifenn.run_files import write_spec
+    from ifenn.studies.adaptive_resolution import adaptive_resolution_curves, adaptive_resolution_table, uniform_dofs
+    from ifenn.studies.plots import adaptive_resolution_figure
+
+    for folder, run_spec in ((reference_dir, spec), (quarter_tmp / "fem", quarter_spec), (adaptive_dir, adaptive_spec)):
+        write_spec(folder / "spec.json", run_spec)
+    cases = {"snt1-II": {"fem_run": "snt1-II-quarter", "fine_fem_run": "snt1-II-fine", "fem_dir": quarter_tmp / "fem",
+                         "fine_dir": reference_dir, "adaptive_dirs": {"snt1-II-adaptive": adaptive_dir}}}
+    table = adaptive_resolution_table(cases)
+    assert (table.fine_uniform_dofs == uniform_dofs(spec["scene"])).all() and (table.fine_reference == "adaptive/snt1-II-fine-adaptive").all()
+    adaptive_resolution_figure(adaptive_resolution_curves(cases), table, tmp_path_factory.mktemp("figure") / "resolution.png")

@@ -10,7 +10,8 @@ runs "fem-adaptive", the certified pixel solve, or "verified-adaptive", the veri
   u) over the run's increments after the finer FEM's peak, over the finer peak, percent;
 - ``wall_s`` (provenance.json's wall_time_s) and ``wall_fem_h_s``, the FEM run at h's, from the same DAG;
 - ``dofs_fraction_of_fine``: the run's mean displacement dofs over the increments, over those of
-  the finer uniform mesh (2 per node, the slits' twins included), and the largest fraction;
+  the finer uniform mesh (``fine_uniform_dofs``: 2 per node, the slits' twins included; also where
+  the finer reference itself is an adaptive run), and the largest fraction;
 - per adaptive run, the rebuilds and the increments whose crack core still left the fine region
   (``outside_fine``: reported, never hidden).
 
@@ -55,6 +56,7 @@ def resolution_rows(fem: pd.DataFrame, fine: pd.DataFrame, adaptive: dict[str, p
                "peak_error_vs_fine_pct": float(100 * (force.max() / peak_fine - 1)),
                "wall_s": wall[name or "fem"], "wall_fem_h_s": wall["fem"],
                "dofs_fraction_of_fine": float(dofs.mean() / fine_dofs), "dofs_fraction_of_fine_max": float(dofs.max() / fine_dofs),
+               "fine_uniform_dofs": int(fine_dofs),
                "peak_force": float(force.max()), "peak_force_fine": float(peak_fine),
                "remeshes": int(history.remeshes.sum()) if "remeshes" in history else 0,
                "increments_outside_fine": int(history.outside_fine.sum()) if "outside_fine" in history else 0}
