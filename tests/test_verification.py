@@ -131,6 +131,34 @@ def test_a_spoiled_prediction_is_flagged_and_corrected_within_the_tolerance():
     np.testing.assert_array_equal(out[150:, :40], exact[150:, :40])
 
 
+def test_the_uncapped_equation_is_certified_while_the_network_sees_the_cap():
+    """cap_history false: the network still gets H capped at history_cap, but the step certifies
+    FEM's equation on H itself: within the tolerance of the uncapped exact solution, and the crack
+    is no longer held at phi <= 2 H_cap / (Gc/lc + 2 H_cap) (0.9991 for 5e4), which it is with the
+    published cap_history true."""
+    cap = 5.0e4
+    history = synthetic_history(n_px=96, x_tip=0.0, band_peak=5.0e6, history_cap=1.0e7)   # a crack far beyond the cap
+    assert history.max() > 50 * cap
+
+    class Recording(Replay):
+        def __call__(self, capped):
+            self.seen = float(capped.max())
+            return super().__call__(capped)
+
+    capped_bound = 2 * cap / (GC / LC + 2 * cap)
+    for cap_history, exact_history in ((True, np.minimum(history, cap)), (False, history)):
+        exact = solve_pixel_equation(exact_history, GC, LC, H_PX, "replicate", rtol=1e-13)
+        network = Recording([solve_pixel_equation(np.minimum(history, cap), GC, LC, H_PX, "replicate", rtol=1e-6)])
+        verified = VerifiedInference(network, PixelEquation(GC, LC, H_PX), tolerance=1e-4, history_cap=cap, cap_history=cap_history)
+        out = verified(history)
+        assert network.seen <= cap and verified.residual_after <= 1e-4
+        assert np.max(np.abs(out - exact)) <= 1e-4
+        if cap_history:
+            assert out.max() <= capped_bound + 1e-4
+        else:
+            assert out.max() > capped_bound + 5e-4 and verified.corrected_fraction > 0
+
+
 def test_a_spoiled_network_is_corrected_step_after_step_on_a_growing_crack():
     """A PICNN with perturbed weights on a crack that grows: every step ends within the
     tolerance of the exact pixel solution, with the network in full or process-zone

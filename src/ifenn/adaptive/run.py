@@ -203,15 +203,15 @@ class AdaptiveRun:
 
     def _phase_field(self, phi: np.ndarray, history: np.ndarray) -> tuple[np.ndarray, int, float, float]:
         """The phase field of ``history`` (module doc, step 3): the certified pixel solve from
-        ``phi`` (in place), or the verified IFENN step (network, check, correction) on the capped
-        H. Returns (phi, CG iterations, network seconds, max |r| after)."""
+        ``phi`` (in place), or the verified IFENN step (network, check, correction; on the capped H
+        unless its cap_history is off). Returns (phi, CG iterations, network seconds, max |r| after)."""
         if self.verified is None:
             worst, iterations = self.equation.solve_box(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])),
                                                         self.settings.phase_field_tolerance)
             return phi, iterations, 0.0, worst
         step = self.verified
         step.start_from(phi)
-        phi = step(np.clip(history, 0.0, self.spec["history_cap"]))
+        phi = step(np.maximum(history, 0.0))   # capped by the step: for the network, for its equation unless cap_history is off
         return phi.copy(), step.solve_iterations, step.t_network, step.residual_after
 
     # ------------------------------------------------------------------ mesh

@@ -50,7 +50,8 @@ class PixelPhaseField:
         image = problem.pixels_from_gauss_points(problem.history)
         phi = None
         if image is not None:
-            phi = self.inference(np.clip(image, 0.0, self.history_cap))
+            # a verified step caps H itself: for the network, and for its equation unless cap_history is off
+            phi = self.inference(np.maximum(image, 0.0) if self.verified else np.clip(image, 0.0, self.history_cap))
             # summed over staggered iterations, like the other timings
             self.timings["t_inference_s"] += self.inference.t_network
             self.timings["evaluated_fraction"] += self.inference.evaluated_fraction

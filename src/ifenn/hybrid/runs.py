@@ -105,7 +105,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
         return VerifiedInference(network, equation, verification["tolerance"],
-                                 verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start)
+                                 verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start,
+                                 spec["history_cap"], verification.get("cap_history", True))
     return _network_inference(spec, model_path, h_px, shape, device)
 
 

@@ -5,7 +5,8 @@ The pixel equation (the PICNN's physics loss, :func:`ifenn.network.picnn.residua
 
     R_i(phi) = (Gc/lc + 2 H_i) phi_i - D (K9*(phi)_i - 3 phi_i) - 2 H_i,   D = Gc lc / h_px^2,
 
-with H the capped history (the network's input) and the Laplacian's padding ("replicate":
+with H the capped history (the network's input; H itself, FEM's equation, with ``cap_history``
+false) and the Laplacian's padding ("replicate":
 zero flux, or "zeros"). Written as A phi = 2 H, A is a strictly diagonally dominant M-matrix:
 off-diagonal entries -D w_ij <= 0 and every row sums to at least a_i = Gc/lc + 2 H_i (exactly
 a_i with zero flux; more with zeros padding, which drops the neighbours beyond the image).
@@ -376,7 +377,8 @@ class VerifiedInference:
 
     def __init__(self, inference, equation: PixelEquation, tolerance: float = _DEFAULTS["tolerance"],
                  margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
-                 solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"]):
+                 solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"],
+                 history_cap: float | None = None, cap_history: bool = _DEFAULTS["cap_history"]):
         if warm_start not in WARM_STARTS:
             raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
         if warm_start != "previous" and inference is None:
@@ -390,11 +392,15 @@ class VerifiedInference:
         self.margin = int(np.ceil(float(margin_lc) * equation.lc / equation.h_px))
         self.max_rounds, self.solve_fraction = int(max_rounds), float(solve_fraction)
         self.warm_start = warm_start
+        # the network sees H capped at history_cap; the equation too (cap_history, the published step)
+        # or H itself (FEM's equation). None: the caller caps (the history it passes is the equation's)
+        self.history_cap = None if history_cap is None else float(history_cap)
+        self.cap_history = bool(cap_history)
         self.failing_fraction = 0.0
         self.kernel = getattr(inference, "kernel", "")
         self.phi = None           # last verified phi image
         self.residual = None      # its normalised residual
-        self.history = None       # the capped H it was verified for
+        self.history = None       # the H of the equation it was verified for
         self.prediction = None    # the network's last prediction (a copy)
         self.t_network = self.t_check = self.t_correction = 0.0
         self.evaluated_fraction = self.corrected_fraction = 0.0
@@ -407,13 +413,13 @@ class VerifiedInference:
         if self.phi is None:
             self.phi = np.array(phi, dtype=np.float64)
 
-    def _candidate(self, capped: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """The warm start and the mask of pixels whose phi changed since the last verified
-        phi (None: check the whole image)."""
+    def _candidate(self, capped: np.ndarray, history: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The warm start (the network sees ``capped``; ``history``: the equation's H) and the mask
+        of pixels whose phi changed since the last verified phi (None: check the whole image)."""
         if self.warm_start == "previous":
             self.t_network, self.evaluated_fraction = 0.0, 0.0
             if self.phi is None:  # nothing to continue from: the local solution 2H / (Gc/lc + 2H)
-                return 2.0 * capped / (self.equation.reaction0 + 2.0 * capped), None
+                return 2.0 * history / (self.equation.reaction0 + 2.0 * history), None
             return self.phi.copy(), np.zeros(capped.shape, bool)
         prediction = np.asarray(self.inference(capped), dtype=np.float64)
         self.t_network, self.evaluated_fraction = self.inference.t_network, self.inference.evaluated_fraction
@@ -430,25 +436,30 @@ class VerifiedInference:
         self.prediction[changed] = prediction[changed]
         return candidate, changed
 
-    def __call__(self, capped: np.ndarray) -> np.ndarray:
-        capped = np.asarray(capped, dtype=np.float64)
-        phi, changed_phi = self._candidate(capped)
+    def __call__(self, history: np.ndarray) -> np.ndarray:
+        """The verified phi of a history image (N/mm^2, >= 0): capped at ``history_cap`` for the
+        network, and for the equation too unless ``cap_history`` is false."""
+        history = np.asarray(history, dtype=np.float64)
+        network_input = history if self.history_cap is None else np.minimum(history, self.history_cap)
+        if self.cap_history:
+            history = network_input
+        phi, changed_phi = self._candidate(network_input, history)
         started = time.perf_counter()
-        if changed_phi is None or self.residual is None or self.residual.shape != capped.shape:
-            residual = self.equation.residual_on(phi, capped, (slice(0, capped.shape[0]), slice(0, capped.shape[1])))
+        if changed_phi is None or self.residual is None or self.residual.shape != history.shape:
+            residual = self.equation.residual_on(phi, history, (slice(0, history.shape[0]), slice(0, history.shape[1])))
         else:
             # the residual changes only where H or phi (within one pixel) changed
-            stale = changed_phi | (capped != self.history)
+            stale = changed_phi | (history != self.history)
             residual = self.residual
             box = _bounding_box(stale, 1)
             if box is not None:  # one pass over the changes' bounding box (grown by the stencil)
-                residual[box] = self.equation.residual_on(phi, capped, box)
+                residual[box] = self.equation.residual_on(phi, history, box)
         failing = np.abs(residual) > self.tolerance
         self.residual_before = float(np.max(np.abs(residual), initial=0.0))
         self.failing_fraction = float(np.count_nonzero(failing)) / failing.size
         self.t_check = time.perf_counter() - started
         started = time.perf_counter()
-        corrected = np.zeros(capped.shape, bool)
+        corrected = np.zeros(history.shape, bool)
         self.solve_iterations = 0
         self.solve_work = 0.0   # CG iterations x box pixels / image pixels: a load-independent cost
         margin = self.margin
@@ -459,12 +470,12 @@ class VerifiedInference:
             if sum(box_area(box) for box in boxes) > self.GLOBAL_FRACTION * failing.size:
                 boxes = [(slice(0, failing.shape[0]), slice(0, failing.shape[1]))]
             for box in boxes:
-                _, iterations = self.equation.solve_box(phi, capped, box, self.solve_fraction * self.tolerance)
+                _, iterations = self.equation.solve_box(phi, history, box, self.solve_fraction * self.tolerance)
                 self.solve_iterations += iterations
-                self.solve_work += iterations * box_area(box) / capped.size
+                self.solve_work += iterations * box_area(box) / history.size
                 corrected[box] = True
-                around = grow_box(box, 1, capped.shape)
-                residual[around] = self.equation.residual_on(phi, capped, around)
+                around = grow_box(box, 1, history.shape)
+                residual[around] = self.equation.residual_on(phi, history, around)
             failing = np.abs(residual) > self.tolerance
             log.debug("correction round: %d boxes over %.3f of the image, %d pixels still failing",
                       len(boxes), sum(box_area(b) for b in boxes) / failing.size, int(np.count_nonzero(failing)))
@@ -472,5 +483,5 @@ class VerifiedInference:
         self.residual_after = float(np.max(np.abs(residual), initial=0.0))
         self.corrected_fraction = float(np.count_nonzero(corrected)) / corrected.size
         self.t_correction = time.perf_counter() - started
-        self.phi, self.residual, self.history = phi, residual, capped.copy()
+        self.phi, self.residual, self.history = phi, residual, history.copy()
         return phi
