@@ -32,6 +32,21 @@ def test_settings_resolve_and_bad_ones_name_the_key():
     assert network_device({"predictor": "exact_pixel"}, "cuda") is None and device_record(None) == {}
 
 
+def test_cuda_without_one_is_refused_before_any_job(paper_config):
+    """device: cuda on a machine whose torch sees no CUDA device stops the config check, naming the
+    key (a run would otherwise fail at its first network call); accepted where one is present."""
+    import copy
+
+    from ifenn.config import ConfigError, validate_config
+
+    config = {**copy.deepcopy(paper_config), "device": "cuda"}
+    if CUDA:
+        assert validate_config(config)["device"] == "cuda"
+    else:
+        with pytest.raises(ConfigError, match="config key 'device': 'cuda', but torch .* sees no CUDA device"):
+            validate_config(config)
+
+
 def test_the_config_checks_no_longer_import_the_network():
     """config -> network.settings -> schema: the checks resolve a training preset without torch
     (the circle config -> training -> picnn -> config is gone)."""

@@ -178,6 +178,13 @@ def _petsc_problems(key: str, options: dict) -> list[str]:
 
 def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
     problems: list[str] = []
+    if config.get("device") == "cuda":   # torch is imported only for this (ifenn.device)
+        from ifenn.device import resolve_device
+
+        try:
+            resolve_device("cuda")
+        except ValueError as error:
+            problems.append(str(error))
     presets = config["solver"]["linear_solver_presets"]
     if config["solver"]["linear_solvers"] not in presets:
         problems.append(
