@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.config import REPO, load_config
-from ifenn.device import describe, resolve_device
+from ifenn.device import default_devices, describe, resolve_device
 from ifenn.network.picnn import solve_pixel_equation
 from ifenn.network.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
 
@@ -76,9 +76,7 @@ def main() -> None:
                         help="where to train (default: cpu, and cuda where torch sees one)")
     parser.add_argument("--csv", type=Path, default=None, help="also write the table here")
     args = parser.parse_args()
-    import torch
-
-    devices = [resolve_device(d, "--devices") for d in (args.devices or ["cpu"] + (["cuda"] if torch.cuda.is_available() else []))]
+    devices = [resolve_device(d, "--devices") for d in args.devices] if args.devices else default_devices()
 
     material = load_config(REPO / "config/config.yaml")["material"]
     Gc, lc = material["Gc"], material["lc"]

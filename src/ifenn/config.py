@@ -19,7 +19,7 @@ import jsonschema
 import yaml
 
 from ifenn.network.settings import resolve_settings
-from ifenn.schema import REPO, SCHEMA_PATH, _schema, schema_default, schema_defaults  # noqa: F401 (re-exported)
+from ifenn.schema import REPO, SCHEMA_PATH, _schema  # noqa: F401 (REPO: for the benchmarks)
 
 EDGES = ("left", "right", "bottom", "top")
 # speed_accuracy: method -> the config section of its runs

@@ -14,11 +14,15 @@ import os
 DEVICES = ("auto", "cpu", "cuda")
 
 
-def resolve_device(setting: str = "auto", key: str = "device"):
-    """The torch device of a ``device`` setting; an unknown value or ``cuda`` without a CUDA
-    device is refused naming ``key``, the value and what is allowed."""
+def resolve_device(setting="auto", key: str = "device"):
+    """The torch device of a ``device`` setting (None: auto; a torch device is returned as it is,
+    so a device resolved once can be handed down through the same calls); an unknown value or
+    ``cuda`` without a CUDA device is refused naming ``key``, the value and what is allowed."""
     import torch
 
+    if isinstance(setting, torch.device):
+        return setting
+    setting = "auto" if setting is None else setting
     if setting not in DEVICES:
         raise ValueError(f"config key '{key}': {setting!r}; allowed: {list(DEVICES)}")
     if setting == "cuda" and not torch.cuda.is_available():
@@ -45,9 +49,7 @@ def describe(device) -> str:
 def network_device(spec: dict, device="auto"):
     """The torch device of a run whose predictor is the network (``device`` resolved once, here,
     and handed down); None for the other predictors, which then never import torch."""
-    if spec.get("predictor") != "picnn":
-        return None
-    return resolve_device(device) if isinstance(device, str) else device
+    return resolve_device(device) if spec.get("predictor") == "picnn" else None
 
 
 def device_record(device) -> dict:

@@ -130,7 +130,7 @@ def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"
         from ifenn.network.orbit import make_evaluator
         from ifenn.network.picnn import load_picnn
 
-        device = resolve_device(device or "auto") if device is None or isinstance(device, str) else device
+        device = resolve_device(device)
         model, _ = load_picnn(model_path, device)
         # the orbit sums are a CPU kernel; on a GPU the network's own convolutions
         evaluator = make_evaluator(model, spec.get("evaluation", "orbit") if device.type == "cpu" else "convolution")

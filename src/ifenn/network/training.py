@@ -215,7 +215,7 @@ def train_picnn(
     from ifenn.device import resolve_device
 
     s = resolve_settings(settings)
-    device = device if isinstance(device, torch.device) else resolve_device(device)
+    device = resolve_device(device)
     torch.set_num_threads(threads)
     torch.manual_seed(seed)
     was_deterministic = torch.are_deterministic_algorithms_enabled()

@@ -394,10 +394,9 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
     if benchmark is not None and len(benchmark):
         names = {"ifenn_full_convolution": "full image, convolutions (the paper)", "ifenn_full": "full image, orbit evaluation",
                  "ifenn_process_zone": "process zone"}
-        devices = benchmark.device if "device" in benchmark else benchmark.method.map(lambda _: "cpu")
         ranges = [f"{label}{'' if device == 'cpu' else f' on {device}'} {g.min():.2g}-{g.max():.2g}x"
-                  for device in dict.fromkeys(devices) for method, label in names.items()
-                  if len(g := benchmark[(benchmark.method == method) & (devices == device)].phase_field_speedup_vs_fem)]
+                  for device in dict.fromkeys(benchmark.device) for method, label in names.items()
+                  if len(g := benchmark[(benchmark.method == method) & (benchmark.device == device)].phase_field_speedup_vs_fem)]
         title += ("\nIFENN phase-field step against the FEM one it replaces, same core (phase_field_speed.csv, "
                   f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
     fig.suptitle(title, fontsize=9)
@@ -500,8 +499,6 @@ def whole_run_speed_figure(increments, summary, path) -> None:
     (ifenn.studies.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
     (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked. IFENN
     is drawn once per device it ran on (column ``device``, labelled by name)."""
-    if "device" not in increments:
-        increments, summary = increments.assign(device="cpu"), summary.assign(device="cpu")
     runs = list(dict.fromkeys(increments.run))
     fig, axes = plt.subplots(2, len(runs), figsize=(4.2 * len(runs), 6.4), squeeze=False, sharex="col")
     ifenn_colours = ["tab:red", "tab:green", "tab:purple"]

@@ -179,7 +179,7 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
     from ifenn.device import network_device
     from ifenn.fem.mesh import build_mesh, write_mesh
 
-    device = network_device(spec, device) if fem_dir is not None else None
+    device = network_device(spec, device)   # None for FEM cells and the exact pixel solve
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     for stale in (run_files.STATUS, run_files.HISTORY, run_files.FIELDS, "paraview.xdmf", "paraview.h5", run_files.PROVENANCE):
