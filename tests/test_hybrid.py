@@ -55,12 +55,22 @@ def test_zero_padding_and_smoothing_leave_residual_force(fem_run, quick_config):
     assert smooth.phi_max.iloc[-1] < zeros.phi_max.iloc[-1]
 
 
-def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tmp_path):
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tmp_path, backend, monkeypatch):
     """An untrained (random) PICNN, checked and corrected every increment: the corrected
     phase field is the exact pixel solution within the tolerance, so the run tracks FEM as the
     exact pixel solver does: force within 1 % (L2), cut through like FEM's, and every
-    increment ends with max |r| within the tolerance."""
+    increment ends with max |r| within the tolerance. ``torch``: the step a GPU runs
+    (ifenn.hybrid.device_step), here on the CPU, through the same run."""
     import torch
+
+    import ifenn.hybrid.runs
+    from ifenn.hybrid.device_step import DeviceVerifiedInference
+
+    monkeypatch.setattr(ifenn.hybrid.runs, "verified_step_backend", lambda device: backend)
+    device_calls = []
+    step = DeviceVerifiedInference.__call__
+    monkeypatch.setattr(DeviceVerifiedInference, "__call__", lambda self, history: device_calls.append(1) or step(self, history))
 
     from ifenn.network.picnn import PICNN, InputScaling, save_picnn
 
@@ -76,7 +86,7 @@ def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tm
                     process_zone=quick_config["ifenn"]["process_zone"], verification=verified)
     hybrid = pd.DataFrame(run_ifenn(run_spec, tmp / "mesh.xdmf", tmp / "fem", model, tmp_path / "verified", progress=False))
     active = hybrid[hybrid.hybrid_active == 1]
-    assert len(active) > 0
+    assert len(active) > 0 and len(device_calls) == (len(active) if backend == "torch" else 0)
     assert (active.verify_residual_after <= verified["tolerance"]).all()
     assert active.verify_residual_before.iloc[0] > 10 * verified["tolerance"]  # the random network is flagged
     assert (active.verify_corrected_fraction > 0).any()

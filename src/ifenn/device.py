@@ -1,7 +1,9 @@
 """Where the network's tensors live: the config's ``device`` (``auto``: CUDA when torch sees
 one, else the CPU; ``cpu``; ``cuda``), resolved once per process and handed to training and
-inference. The FEM stays on PETSc (CPU); the pixel equation's exact solver and the verified
-step's correction are numpy/scipy today (the GPU issue's step 2 moves the correction).
+inference. The FEM stays on PETSc (CPU). The verified step runs where the network does: on the
+CPU its compiled check and correction (:mod:`ifenn.hybrid.verification`), on a GPU the whole step
+in torch (:mod:`ifenn.hybrid.device_step`: H up once, phi down once). The exact pixel solver
+(a sparse direct solve) stays on the CPU.
 
 The setting is not part of a run's spec (a spec says what is computed, the device where): a
 run's provenance.json records the device that computed it (:func:`describe`).

@@ -82,12 +82,22 @@ def slit_cuts(spec: dict):
     return SlitCuts.for_scene(spec["scene"], PixelGrid.for_scene(spec["scene"]), spec["pixel_padding"])
 
 
+def verified_step_backend(device) -> str:
+    """Which verified step a run on ``device`` takes: 'compiled' on the CPU (the compiled check and
+    correction, :mod:`ifenn.hybrid.verification`), 'torch' on a GPU (the whole step on the device,
+    :mod:`ifenn.hybrid.device_step`)."""
+    from ifenn.device import resolve_device
+
+    return "torch" if resolve_device(device).type == "cuda" else "compiled"
+
+
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None,
                    device="auto"):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
     checked and corrected by the pixel equation when ``spec['verification']['enabled']``
-    (:mod:`ifenn.hybrid.verification`). ``shape``: the image's, when known (what the network keeps
-    is then allocated now). ``device``: where the network runs (:mod:`ifenn.device`)."""
+    (:mod:`ifenn.hybrid.verification`; on a GPU the same step in torch, :func:`verified_step_backend`).
+    ``shape``: the image's, when known (what the network keeps is then allocated now). ``device``:
+    where the network runs (:mod:`ifenn.device`)."""
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
         from ifenn.hybrid.verification import PixelEquation, VerifiedInference
@@ -95,6 +105,18 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
         warm_start = verification["warm_start"]
+        Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
+        settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"],
+                    warm_start, spec["history_cap"], verification.get("cap_history", True))
+        if verified_step_backend(device) == "torch":   # the whole step on the device (ifenn.hybrid.device_step)
+            from ifenn.device import resolve_device
+            from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
+            from ifenn.network.picnn import load_picnn
+
+            device = resolve_device(device)
+            model = load_picnn(model_path, device)[0] if warm_start != "previous" else None
+            equation = DevicePixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec), device)
+            return DeviceVerifiedInference(model, equation, *settings, sigma=spec["smoothing_sigma"], truncate=spec["smoothing_truncate"])
         network = None
         if warm_start != "previous":
             # the network only warm-starts a certified correction: how often it is asked is its own setting
@@ -102,11 +124,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             if verification.get("network_tolerance") is not None:
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
             network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device)
-        Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
-        return VerifiedInference(network, equation, verification["tolerance"],
-                                 verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"], warm_start,
-                                 spec["history_cap"], verification.get("cap_history", True))
+        return VerifiedInference(network, equation, *settings)
     return _network_inference(spec, model_path, h_px, shape, device)
 
 

@@ -1,0 +1,394 @@
+"""The verified phase-field step in torch, on the run's device (the GPU's path; issue 32 step 2).
+
+The same step as :class:`ifenn.hybrid.verification.VerifiedInference` (read its module doc for
+the equation, the certificate and the warm starts), with every array a torch tensor on one
+device: the history goes up once per call, the network (its own convolutions), the Gaussian
+smoothing, the residual check and the multigrid-preconditioned correction run there, and the
+certified phi comes down once. On the CPU the workflow keeps the compiled step (``device: cpu``
+gives today's phi bit for bit); this one is what a CUDA device runs, and the tests run it on the
+CPU too, where torch is its own reference.
+
+The correction is a port of the compiled ``ifenn_pixel_mg_pcg`` (orbit_kernel.cpp), the same
+algorithm, not the same round-off: conjugate gradients in float64 on the cut pixel operator,
+preconditioned by one V-cycle in float32: cell-centred levels halved while both sides exceed 4
+cells (at most 16), Jacobi smoothing 2 + 2 sweeps (30 on the coarsest level), bilinear
+cell-centred transfers (3/4 of the parent, 1/4 of its neighbour; an edge's replicate ghost keeps
+the weight, a Dirichlet one drops it), restriction P^T r / 4, coarse a = the mean of its
+children, D / 4 per level, and the slits' links redrawn at each level's spacing
+(:meth:`ifenn.pixels.SlitCuts.coarse_links`). The certificate is computed in float64 from the
+CG's own residual, so it holds whatever precision the preconditioner has.
+
+What differs from the CPU step, by design for a device where a launch costs more than a pixel:
+the residual is recomputed on the whole image (no stale-pixel bookkeeping), the network is
+evaluated on the whole image each call (no process zone), and the failing pixels are corrected
+in one box per round (their bounding box grown by the margin; the whole image past
+``GLOBAL_FRACTION``). The certificate is the same: max |r| <= tolerance over the whole image, or
+the step is reported (``residual_after``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ifenn.hybrid.verification import _DEFAULTS, WARM_STARTS
+from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
+
+#: Jacobi sweeps before and after the coarse correction, and on the coarsest level (the compiled V-cycle's)
+SMOOTH_SWEEPS, COARSEST_SWEEPS = 2, 30
+
+
+def _ghosted(x: torch.Tensor, replicate: tuple[bool, bool, bool, bool]) -> torch.Tensor:
+    """x (n, m) with a one-cell frame: zero (Dirichlet data 0), or the edge's own values on the
+    sides (first row, last row, first column, last column) where ``replicate`` (zero flux)."""
+    ext = F.pad(x, (1, 1, 1, 1))
+    if replicate[0]:
+        ext[0, 1:-1] = x[0]
+    if replicate[1]:
+        ext[-1, 1:-1] = x[-1]
+    if replicate[2]:
+        ext[:, 0] = ext[:, 1]
+    if replicate[3]:
+        ext[:, -1] = ext[:, -2]
+    return ext
+
+
+class _Level:
+    """One multigrid level of a box: its shape, ghosts, cut links and (per call) coefficients."""
+
+    def __init__(self, shape, replicate, links, dtype, device):
+        self.shape, self.replicate, self.dtype = tuple(shape), tuple(bool(r) for r in replicate), dtype
+        self.stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=dtype, device=device).reshape(1, 1, 3, 3)
+        rows, cols, weights = links if links is not None else (np.zeros(0, int),) * 2 + (np.zeros(0),)
+        self.n_cut = len(rows)
+        if self.n_cut:
+            self.rows = torch.as_tensor(np.asarray(rows, dtype=np.int64), device=device)
+            self.cols = torch.as_tensor(np.maximum(np.asarray(cols, dtype=np.int64), 0), device=device)
+            # a link to beyond the box reads the Dirichlet data, 0: its weight is kept off the diagonal only
+            self.cut_w = torch.as_tensor(np.asarray(weights, dtype=np.float64), dtype=dtype, device=device)
+            self.link_w = torch.as_tensor(np.where(np.asarray(cols) >= 0, weights, 0.0), dtype=dtype, device=device)
+        self.D = 0.0
+        self.diag = self.inv = None
+
+    def set_coefficients(self, a: torch.Tensor, D: float) -> None:
+        """The level's operator a I - D (K9* - 3 I) with its cut links: diagonal a + 3 D - D sum w."""
+        self.D = D
+        diag = (a + 3.0 * D).to(self.dtype)
+        if self.n_cut:
+            diag = diag.reshape(-1).index_add(0, self.rows, -D * self.cut_w).reshape(self.shape)
+        self.diag, self.inv = diag, 1.0 / diag
+
+    def apply(self, x: torch.Tensor) -> torch.Tensor:
+        """A x, x with zero Dirichlet data around the box (the padding on the image's edges)."""
+        neighbours = F.conv2d(_ghosted(x, self.replicate)[None, None], self.stencil)[0, 0]
+        out = self.diag * x - self.D * neighbours
+        if self.n_cut:  # the cut links' neighbour terms back out: (A_cut x)_i = diag_cut x_i - D (K9* x)_i + D w x_j
+            out = out.reshape(-1).index_add(0, self.rows, self.D * self.link_w * x.reshape(-1)[self.cols]).reshape(self.shape)
+        return out
+
+    def jacobi(self, b: torch.Tensor, sweeps: int, x: torch.Tensor | None = None) -> torch.Tensor:
+        """``sweeps`` Jacobi sweeps x += diag^-1 (b - A x); from x = 0 the first is diag^-1 b."""
+        if x is None:
+            x, sweeps = self.inv * b, sweeps - 1
+        for _ in range(sweeps):
+            x = x + self.inv * (b - self.apply(x))
+        return x
+
+
+def _transfer(nf: int, nc: int, rep_low: bool, rep_high: bool, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Cell-centred bilinear interpolation in one direction (the compiled ``mg_transfer``): fine i
+    takes 3/4 of its parent i // 2 and 1/4 of the parent's neighbour towards i; a neighbour beyond
+    the edge is the parent itself (replicate: weight 1) or dropped (weight 0). (nf, 2) indices and
+    weights."""
+    index, weight = np.zeros((nf, 2), np.int64), np.zeros((nf, 2))
+    for i in range(nf):
+        p = i // 2
+        q = p - 1 if i % 2 == 0 else p + 1
+        index[i] = (p, q if 0 <= q < nc else p)
+        if 0 <= q < nc:
+            weight[i] = (0.75, 0.25)
+        elif (q < 0 and rep_low) or (q >= nc and rep_high):
+            weight[i] = (1.0, 0.0)
+        else:
+            weight[i] = (0.75, 0.0)
+    return torch.as_tensor(index, device=device), torch.as_tensor(weight, dtype=torch.float32, device=device)
+
+
+class DeviceMultigrid:
+    """The V-cycle of one box (shape, edges, cut links per level), float32 on ``device``: the
+    preconditioner of :meth:`DevicePixelEquation.solve_box` (module doc)."""
+
+    def __init__(self, shape, replicate, level_links, device):
+        self.levels = [_Level(shape, replicate, level_links[0], torch.float32, device)]
+        while self.levels[-1].shape[0] > 4 and self.levels[-1].shape[1] > 4 and len(self.levels) < 16:
+            n, m = self.levels[-1].shape
+            coarse = ((n + 1) // 2, (m + 1) // 2)
+            k = len(self.levels)
+            self.levels.append(_Level(coarse, replicate, level_links[k] if k < len(level_links) else None, torch.float32, device))
+        self.rows, self.cols, self.children = [], [], []
+        for fine, coarse in zip(self.levels[:-1], self.levels[1:], strict=True):
+            (nf, mf), (nc, mc) = fine.shape, coarse.shape
+            self.rows.append(_transfer(nf, nc, replicate[0], replicate[1], device))
+            self.cols.append(_transfer(mf, mc, replicate[2], replicate[3], device))
+            # the (up to 4) children of each coarse cell: an odd edge counts its last row / column twice
+            i0 = torch.arange(nc, device=device) * 2
+            j0 = torch.arange(mc, device=device) * 2
+            self.children.append((i0, torch.clamp(i0 + 1, max=nf - 1), j0, torch.clamp(j0 + 1, max=mf - 1)))
+
+    def set_coefficients(self, a: torch.Tensor, D: float) -> None:
+        """Every level's coefficients for the finest ``a``: coarse a the mean of its children, D / 4."""
+        a = a.to(torch.float32)
+        for k, level in enumerate(self.levels):
+            level.set_coefficients(a, D)
+            if k + 1 < len(self.levels):
+                i0, i1, j0, j1 = self.children[k]
+                top, bottom = a[i0], a[i1]
+                a = 0.25 * (top[:, j0] + top[:, j1] + bottom[:, j0] + bottom[:, j1])
+                D = D / 4.0
+
+    def _restrict(self, k: int, r: torch.Tensor) -> torch.Tensor:
+        """P^T r / 4, separably (rows, then columns)."""
+        (row_i, row_w), (col_i, col_w) = self.rows[k], self.cols[k]
+        nc, mc = self.levels[k + 1].shape
+        t = torch.zeros((nc, r.shape[1]), dtype=r.dtype, device=r.device)
+        t.index_add_(0, row_i[:, 0], 0.25 * row_w[:, :1] * r).index_add_(0, row_i[:, 1], 0.25 * row_w[:, 1:] * r)
+        out = torch.zeros((nc, mc), dtype=r.dtype, device=r.device)
+        return out.index_add_(1, col_i[:, 0], col_w[:, 0] * t).index_add_(1, col_i[:, 1], col_w[:, 1] * t)
+
+    def _prolong(self, k: int, x: torch.Tensor) -> torch.Tensor:
+        """P x, separably."""
+        (row_i, row_w), (col_i, col_w) = self.rows[k], self.cols[k]
+        t = x[:, col_i[:, 0]] * col_w[:, 0] + x[:, col_i[:, 1]] * col_w[:, 1]
+        return t[row_i[:, 0]] * row_w[:, :1] + t[row_i[:, 1]] * row_w[:, 1:]
+
+    def vcycle(self, b: torch.Tensor, k: int = 0) -> torch.Tensor:
+        """One symmetric V-cycle from x = 0 on level ``k`` (float32)."""
+        level = self.levels[k]
+        if k + 1 == len(self.levels):
+            return level.jacobi(b, COARSEST_SWEEPS)
+        x = level.jacobi(b, SMOOTH_SWEEPS)
+        x = x + self._prolong(k, self.vcycle(self._restrict(k, b - level.apply(x)), k + 1))
+        return level.jacobi(b, SMOOTH_SWEEPS, x)
+
+
+class DevicePixelEquation:
+    """The pixel equation of one image in torch on ``device`` (float64): the whole image's
+    residual and box solves (:class:`ifenn.hybrid.verification.PixelEquation`'s, same operator,
+    same cut links)."""
+
+    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None,
+                 device="cpu"):
+        if padding not in ("replicate", "zeros"):
+            raise ValueError(f"pixel equation padding must be 'replicate' or 'zeros', got {padding!r}")
+        self.Gc, self.lc, self.h_px, self.padding = Gc, lc, h_px, padding
+        self.cuts = cuts if cuts else None
+        self.device = torch.device(device)
+        self.diffusion, self.reaction0 = Gc * lc / h_px**2, Gc / lc
+        self._stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=torch.float64, device=self.device).reshape(1, 1, 3, 3)
+        self._cuts_t = None
+        if self.cuts is not None:
+            self._cuts_t = (torch.as_tensor(self.cuts.rows, device=self.device), torch.as_tensor(self.cuts.cols, device=self.device),
+                            torch.as_tensor(self.cuts.weights, dtype=torch.float64, device=self.device))
+        self._grids: dict = {}   # box -> (finest level in float64, its multigrid)
+
+    def residual(self, phi: torch.Tensor, history: torch.Tensor, normalised: bool = True) -> torch.Tensor:
+        """R = a phi - D (K9*(phi) - 3 phi) - 2 H on the whole image (the slits' links cut), or R / a."""
+        rep = self.padding == "replicate"
+        neighbours = F.conv2d(_ghosted(phi, (rep,) * 4)[None, None], self._stencil)[0, 0]
+        a = self.reaction0 + 2.0 * history
+        residual = a * phi - self.diffusion * (neighbours - 3.0 * phi) - 2.0 * history
+        if self._cuts_t is not None:
+            rows, cols, weights = self._cuts_t
+            flat = phi.reshape(-1)
+            flux = torch.zeros_like(flat).index_add_(0, rows, weights * (flat[cols] - flat[rows]))
+            residual = residual + self.diffusion * flux.reshape(phi.shape)
+        return residual / a if normalised else residual
+
+    def _grid(self, box: Box, image_shape) -> tuple[_Level, DeviceMultigrid]:
+        key = (box[0].start, box[0].stop, box[1].start, box[1].stop)
+        if key not in self._grids:
+            ny, nx = image_shape
+            edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
+            replicate = edges if self.padding == "replicate" else (False,) * 4
+            shape = (box[0].stop - box[0].start, box[1].stop - box[1].start)
+            links = [None]
+            if self.cuts is not None:
+                links = [self.cuts.in_box(box)]
+                coarse = shape
+                while coarse[0] > 4 and coarse[1] > 4 and len(links) < 16:
+                    coarse = ((coarse[0] + 1) // 2, (coarse[1] + 1) // 2)
+                    links.append(self.cuts.coarse_links(box, len(links), coarse))
+            if len(self._grids) > 16:
+                self._grids.clear()
+            self._grids[key] = (_Level(shape, replicate, links[0], torch.float64, self.device),
+                                DeviceMultigrid(shape, replicate, links, self.device))
+        return self._grids[key]
+
+    def solve_box(self, phi: torch.Tensor, history: torch.Tensor, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
+        """Solve the pixel equation on ``box`` in place in ``phi`` (the values around it fixed) to
+        max |r| <= ``target`` inside it: CG in float64 preconditioned with one float32 V-cycle.
+        Returns (max |r| reached, iterations); raises if ``maxiter`` iterations do not get there."""
+        level, grid = self._grid(box, phi.shape)
+        a = self.reaction0 + 2.0 * history[box]
+        level.set_coefficients(a, self.diffusion)
+        grid.set_coefficients(a, self.diffusion)
+        inv_a = 1.0 / a
+        r = -self.residual(phi, history, normalised=False)[box]   # the correction solves A delta = -R(phi)
+        delta = torch.zeros_like(r)
+        worst = float((r.abs() * inv_a).max())
+        iterations = 0
+        if worst > target:
+            z = grid.vcycle(r.to(torch.float32)).to(torch.float64)
+            p, rz = z, torch.sum(r * z)
+            while True:
+                if iterations == maxiter:
+                    raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
+                                       f"(reached {worst:g})")
+                iterations += 1
+                q = level.apply(p)
+                alpha = rz / torch.sum(p * q)
+                delta = delta + alpha * p
+                r = r - alpha * q
+                worst = float((r.abs() * inv_a).max())   # the one sync per iteration: the certificate
+                if worst <= target:
+                    break
+                z = grid.vcycle(r.to(torch.float32)).to(torch.float64)
+                rz_new = torch.sum(r * z)
+                p, rz = z + (rz_new / rz) * p, rz_new
+        phi[box] += delta
+        return worst, iterations
+
+
+def gaussian_smoothing(image: torch.Tensor, sigma: float | None, truncate: float = 4.0) -> torch.Tensor:
+    """scipy.ndimage.gaussian_filter(image, sigma, truncate=truncate, mode='reflect') in torch
+    (the same kernel, radius int(truncate sigma + 0.5); 'reflect' = the edge value repeated,
+    d c b a | a b c d), separably."""
+    if not sigma:
+        return image
+    radius = int(truncate * float(sigma) + 0.5)
+    x = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 * x**2 / float(sigma) ** 2)
+    kernel = torch.as_tensor(kernel / kernel.sum(), dtype=image.dtype, device=image.device)
+
+    def along_last(t: torch.Tensor) -> torch.Tensor:
+        n = t.shape[-1]
+        index = np.arange(-radius, n + radius)
+        period = np.mod(index, 2 * n)
+        index = np.where(period < n, period, 2 * n - 1 - period)   # half-sample symmetric
+        padded = t[:, torch.as_tensor(index, device=t.device)]
+        return F.conv1d(padded[:, None], kernel.reshape(1, 1, -1))[:, 0]
+
+    return along_last(along_last(image).T).T
+
+
+def _bounding_box(mask: torch.Tensor, grow: int) -> Box | None:
+    rows, cols = torch.nonzero(mask.any(dim=1)).reshape(-1), torch.nonzero(mask.any(dim=0)).reshape(-1)
+    if rows.numel() == 0:
+        return None
+    box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))
+    return grow_box(box, grow, tuple(mask.shape))
+
+
+class DeviceVerifiedInference:
+    """:class:`ifenn.hybrid.verification.VerifiedInference` on a torch device (module doc): called
+    with a history image (numpy, N/mm^2), returns the certified phi (numpy), with the same
+    records (``corrected_fraction``, ``residual_before`` / ``residual_after``, ``solve_work``,
+    ``t_check``, ``t_correction``, ``t_network``, ``evaluated_fraction``). ``model``: the PICNN
+    (on ``device``), or None with ``warm_start='previous'``."""
+
+    GLOBAL_FRACTION = 0.5
+
+    def __init__(self, model, equation: DevicePixelEquation, tolerance: float = _DEFAULTS["tolerance"],
+                 margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
+                 solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"],
+                 history_cap: float | None = None, cap_history: bool = _DEFAULTS["cap_history"],
+                 sigma: float | None = None, truncate: float = 4.0):
+        if warm_start not in WARM_STARTS:
+            raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
+        if warm_start != "previous" and model is None:
+            raise ValueError("verification warm_start 'network' needs a network")
+        if not tolerance > 0:
+            raise ValueError(f"verification tolerance must be > 0, got {tolerance}")
+        self.model, self.equation, self.tolerance = model, equation, float(tolerance)
+        self.device = equation.device
+        self.margin = int(np.ceil(float(margin_lc) * equation.lc / equation.h_px))
+        self.max_rounds, self.solve_fraction, self.warm_start = int(max_rounds), float(solve_fraction), warm_start
+        self.history_cap = None if history_cap is None else float(history_cap)
+        self.cap_history = bool(cap_history)
+        self.sigma, self.truncate = sigma, truncate
+        self.kernel = "" if model is None else "conv2d"
+        self.phi = self.prediction = None   # last verified phi, last network prediction (tensors on the device)
+        self.t_network = self.t_check = self.t_correction = 0.0
+        self.evaluated_fraction = self.corrected_fraction = self.failing_fraction = 0.0
+        self.residual_before = self.residual_after = 0.0
+        self.solve_iterations, self.solve_work = 0, 0.0
+
+    def start_from(self, phi: np.ndarray) -> None:
+        if self.phi is None:
+            self.phi = torch.as_tensor(np.asarray(phi, dtype=np.float64), device=self.device).clone()
+
+    @torch.no_grad()
+    def _network(self, capped: torch.Tensor) -> torch.Tensor:
+        started = time.perf_counter()
+        dtype = next(self.model.parameters()).dtype
+        raw = self.model.phase_field(capped.to(dtype)[None, None])[0, 0].to(torch.float64)
+        out = gaussian_smoothing(raw, self.sigma, self.truncate)
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        self.t_network, self.evaluated_fraction = time.perf_counter() - started, 1.0
+        return out
+
+    def _candidate(self, capped: torch.Tensor, history: torch.Tensor) -> torch.Tensor:
+        if self.warm_start == "previous":
+            self.t_network, self.evaluated_fraction = 0.0, 0.0
+            if self.phi is None:   # the local solution 2H / (Gc/lc + 2H)
+                return 2.0 * history / (self.equation.reaction0 + 2.0 * history)
+            return self.phi.clone()
+        prediction = self._network(capped)
+        if self.prediction is None or self.phi is None or self.warm_start == "network":
+            candidate = prediction.clone()
+        else:   # "increment": the network's change added to the last verified phi
+            candidate = self.phi + (prediction - self.prediction)
+        self.prediction = prediction
+        return candidate
+
+    @torch.no_grad()
+    def __call__(self, history: np.ndarray) -> np.ndarray:
+        history = torch.as_tensor(np.asarray(history, dtype=np.float64), device=self.device)   # up once
+        network_input = history if self.history_cap is None else torch.clamp(history, max=self.history_cap)
+        if self.cap_history:
+            history = network_input
+        phi = self._candidate(network_input, history)
+        started = time.perf_counter()
+        equation = self.equation
+        residual = equation.residual(phi, history)
+        failing = residual.abs() > self.tolerance
+        self.residual_before = float(residual.abs().max())
+        self.failing_fraction = float(failing.float().mean())
+        self.t_check = time.perf_counter() - started
+        started = time.perf_counter()
+        corrected = torch.zeros(history.shape, dtype=torch.bool, device=self.device)
+        self.solve_iterations, self.solve_work = 0, 0.0
+        margin, size = self.margin, history.numel()
+        for _ in range(self.max_rounds):
+            box = _bounding_box(failing, margin)
+            if box is None:
+                break
+            if box_area(box) > self.GLOBAL_FRACTION * size:
+                box = (slice(0, history.shape[0]), slice(0, history.shape[1]))
+            _, iterations = equation.solve_box(phi, history, box, self.solve_fraction * self.tolerance)
+            self.solve_iterations += iterations
+            self.solve_work += iterations * box_area(box) / size
+            corrected[box] = True
+            residual = equation.residual(phi, history)
+            failing = residual.abs() > self.tolerance
+            margin *= 2
+        self.residual_after = float(residual.abs().max())
+        self.corrected_fraction = float(corrected.float().mean())
+        out = phi.cpu().numpy()   # down once
+        self.t_correction = time.perf_counter() - started
+        self.phi = phi
+        return out

@@ -1,0 +1,149 @@
+"""The verified step in torch (ifenn.hybrid.device_step), the GPU's path, run here on the CPU: the
+same algorithm as the compiled correction (same iterates to round-off, same iteration counts), the
+same certificate, and on CUDA (where present) the same phi to float tolerance."""
+
+import numpy as np
+import pytest
+import scipy.ndimage
+import torch
+
+from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference, gaussian_smoothing
+from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _kernel
+from ifenn.network.picnn import PICNN, InputScaling, solve_pixel_equation
+from ifenn.network.training import synthetic_history
+from ifenn.pixels import PixelGrid, SlitCuts
+
+GC, LC = 2.7, 0.03
+CUDA = torch.cuda.is_available()
+
+
+def _slit_scene(n_px: int, start=(-0.12, 0.0), end=(0.0, 0.0)):
+    """A square of n_px x n_px pixels (h_px = 0.24 / n_px), slit from the left edge, and its cuts."""
+    scene = {"domain": {"x": [-0.12, 0.12], "y": [-0.12, 0.12]}, "elements": [n_px // 2, n_px // 2],
+             "notches": [{"kind": "slit", "start": list(start), "end": list(end)}]}
+    grid = PixelGrid.for_scene(scene)
+    return grid.h_px, SlitCuts.for_scene(scene, grid, "replicate")
+
+
+def _shear_history(n_px: int) -> np.ndarray:
+    """A history field that differs across the slit (a shear-like band above it, none below)."""
+    y, x = (np.mgrid[:n_px, :n_px] + 0.5) / n_px - 0.5
+    band = 5.0e4 * np.exp(-(((y - 0.02) / 0.03) ** 2)) * (y > 0) * np.exp(-np.maximum(x, 0) / 0.1)
+    return band + 20.0 * np.random.default_rng(0).random((n_px, n_px))
+
+
+def test_gaussian_smoothing_is_scipys():
+    image = np.random.default_rng(1).random((37, 53))
+    for sigma in (2.0, 1.3):
+        np.testing.assert_allclose(gaussian_smoothing(torch.as_tensor(image), sigma, 4.0).numpy(),
+                                   scipy.ndimage.gaussian_filter(image, sigma, truncate=4.0, mode="reflect"), atol=1e-14)
+
+
+@pytest.mark.parametrize("padding", ["replicate", "zeros"])
+def test_the_port_is_the_compiled_correction(padding):
+    """Residual and box solves (whole image, a box inside it, a box on the image edge), with the
+    slits' cuts on every level: the torch port takes the compiled kernel's iterations to its iterates
+    (its V-cycle runs in float32 too, so to round-off, not bit for bit)."""
+    if _kernel() is None:
+        pytest.skip("the compiled kernel did not build here: nothing to compare the port with")
+    n = 96
+    h_px, cuts = _slit_scene(n)
+    history = _shear_history(n)
+    phi = 0.3 * np.random.default_rng(2).random((n, n))
+    compiled, port = PixelEquation(GC, LC, h_px, padding, cuts), DevicePixelEquation(GC, LC, h_px, padding, cuts)
+    whole = (slice(0, n), slice(0, n))
+    np.testing.assert_allclose(port.residual(torch.as_tensor(phi), torch.as_tensor(history)).numpy(),
+                               compiled.residual_on(phi, history, whole), atol=1e-12)
+    for box in (whole, (slice(20, 70), slice(10, 80)), (slice(0, 50), slice(0, 61))):
+        a, b = phi.copy(), torch.as_tensor(phi.copy())
+        worst_a, iterations_a = compiled.solve_box(a, history, box, 1e-6)
+        worst_b, iterations_b = port.solve_box(b, torch.as_tensor(history), box, 1e-6)
+        assert iterations_a == iterations_b and 0 < iterations_b < 15
+        assert worst_b <= 1e-6
+        np.testing.assert_allclose(b.numpy(), a, atol=1e-10)
+
+
+def test_the_port_solves_the_cut_equation_to_its_certificate():
+    """Whatever the compiled kernel: a box solve to max |r| <= t is within t of the exact solution
+    of the cut pixel equation (the sparse solver's), across the slit too."""
+    n = 64
+    h_px, cuts = _slit_scene(n)
+    history = _shear_history(n)
+    exact = solve_pixel_equation(history, GC, LC, h_px, "replicate", rtol=1e-13, cuts=cuts)
+    phi = torch.zeros((n, n), dtype=torch.float64)
+    port = DevicePixelEquation(GC, LC, h_px, "replicate", cuts)
+    worst, iterations = port.solve_box(phi, torch.as_tensor(history), (slice(0, n), slice(0, n)), 1e-5)
+    assert worst <= 1e-5 and iterations < 20   # the V-cycle's about tenfold reduction per iteration
+    assert np.max(np.abs(phi.numpy() - exact)) <= 1e-5
+    # the slit holds: above it the band's damage (0.999), right below it only what reaches round the
+    # tip (0.18; 0.99 without the cuts)
+    row = n // 2
+    assert phi[row, 5] - phi[row - 1, 5] > 0.7
+
+
+def _spoiled_network():
+    torch.manual_seed(0)
+    net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    with torch.no_grad():
+        for layer in net.layers:
+            layer.free_weight.mul_(1.0 + 0.3 * torch.randn_like(layer.free_weight))
+    return net
+
+
+@pytest.mark.parametrize("warm_start", ["increment", "network", "previous"])
+def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_start):
+    """The device step with a perturbed PICNN on a growing crack: every step within the
+    tolerance of the exact pixel solution (and of the compiled step's phi, also certified)."""
+    h_px, tolerance = 0.0025, 1e-3
+    net = _spoiled_network() if warm_start != "previous" else None
+    device_step = DeviceVerifiedInference(net, DevicePixelEquation(GC, LC, h_px), tolerance, warm_start=warm_start, sigma=2.0)
+    previous = None
+    for k, x_tip in enumerate(np.linspace(-0.05, 0.04, 4)):
+        history = synthetic_history(n_px=96, x_tip=x_tip)
+        if previous is not None:
+            history = np.maximum(history, previous)
+        previous = history
+        out = device_step(history)
+        exact = solve_pixel_equation(history, GC, LC, h_px, "replicate", rtol=1e-12)
+        assert device_step.residual_after <= tolerance and np.max(np.abs(out - exact)) <= tolerance
+        assert device_step.t_check > 0 and device_step.solve_work >= 0
+        if k == 0 and warm_start != "previous":
+            assert device_step.residual_before > 0.05 and device_step.corrected_fraction > 0   # flagged and corrected
+
+
+def test_the_uncapped_equation_and_the_capped_network_input():
+    """cap_history false certifies H itself while the network sees min(H, cap), as the CPU step."""
+    cap = 5.0e4
+    history = synthetic_history(n_px=64, x_tip=0.0, band_peak=5.0e6, history_cap=1.0e7)
+    seen = []
+
+    class Recording(torch.nn.Module):
+        def phase_field(self, capped):
+            seen.append(float(capped.max()))
+            return torch.zeros_like(capped)
+
+        def parameters(self):
+            return iter([torch.zeros(1)])
+
+    for cap_history, exact_history in ((True, np.minimum(history, cap)), (False, history)):
+        step = DeviceVerifiedInference(Recording(), DevicePixelEquation(GC, LC, 0.0025), 1e-4, history_cap=cap, cap_history=cap_history)
+        out = step(history)
+        exact = solve_pixel_equation(exact_history, GC, LC, 0.0025, "replicate", rtol=1e-13)
+        assert seen[-1] <= cap and np.max(np.abs(out - exact)) <= 1e-4
+
+
+@pytest.mark.skipif(not CUDA, reason=f"torch {torch.__version__} sees no CUDA device on this machine")
+def test_cuda_gives_the_cpu_step_to_float_tolerance():
+    """On a GPU: the same residual to 1e-12, and a certified step within 2 x the tolerance of the
+    CPU's certified phi (both within the tolerance of the exact one)."""
+    n = 96
+    h_px, cuts = _slit_scene(n)
+    history = _shear_history(n)
+    phi = 0.3 * np.random.default_rng(2).random((n, n))
+    cpu, gpu = DevicePixelEquation(GC, LC, h_px, "replicate", cuts), DevicePixelEquation(GC, LC, h_px, "replicate", cuts, "cuda")
+    np.testing.assert_allclose(gpu.residual(torch.as_tensor(phi, device="cuda"), torch.as_tensor(history, device="cuda")).cpu().numpy(),
+                               cpu.residual(torch.as_tensor(phi), torch.as_tensor(history)).numpy(), atol=1e-12)
+    compiled = VerifiedInference(None, PixelEquation(GC, LC, h_px, "replicate", cuts), 1e-3, warm_start="previous")
+    on_gpu = DeviceVerifiedInference(None, gpu, 1e-3, warm_start="previous")
+    np.testing.assert_allclose(on_gpu(history), compiled(history), atol=2e-3)
+    assert on_gpu.residual_after <= 1e-3
