@@ -90,13 +90,27 @@ def _spoiled_network():
     return net
 
 
-@pytest.mark.parametrize("warm_start", ["increment", "network", "previous"])
-def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_start):
+@pytest.mark.parametrize(("warm_start", "as_on_a_gpu"), [("increment", False), ("network", False), ("previous", False),
+                                                        ("increment", True)])
+def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_start, as_on_a_gpu):
     """The device step with a perturbed PICNN on a growing crack: every step within the
-    tolerance of the exact pixel solution (and of the compiled step's phi, also certified)."""
+    tolerance of the exact pixel solution. ``as_on_a_gpu``: as a GPU runs it, every correction on
+    the whole image and every CG iteration the captured graph's (the next direction prepared
+    before the certificate is read)."""
     h_px, tolerance = 0.0025, 1e-3
     net = _spoiled_network() if warm_start != "previous" else None
-    device_step = DeviceVerifiedInference(net, DevicePixelEquation(GC, LC, h_px), tolerance, warm_start=warm_start, sigma=2.0)
+    equation = DevicePixelEquation(GC, LC, h_px)
+    device_step = DeviceVerifiedInference(net, equation, tolerance, warm_start=warm_start, sigma=2.0)
+    if as_on_a_gpu:
+        device_step.global_fraction = 0.0
+        fused = DevicePixelEquation._grid
+
+        def grid(self, box, shape):
+            cg = fused(self, box, shape)
+            cg.fused = True
+            return cg
+
+        equation._grid = grid.__get__(equation)
     previous = None
     for k, x_tip in enumerate(np.linspace(-0.05, 0.04, 4)):
         history = synthetic_history(n_px=96, x_tip=x_tip)
@@ -109,6 +123,8 @@ def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_
         assert device_step.t_check > 0 and device_step.solve_work >= 0
         if k == 0 and warm_start != "previous":
             assert device_step.residual_before > 0.05 and device_step.corrected_fraction > 0   # flagged and corrected
+        if as_on_a_gpu and device_step.solve_iterations:
+            assert device_step.corrected_fraction == 1.0
 
 
 def test_the_uncapped_equation_and_the_capped_network_input():
@@ -147,3 +163,32 @@ def test_cuda_gives_the_cpu_step_to_float_tolerance():
     on_gpu = DeviceVerifiedInference(None, gpu, 1e-3, warm_start="previous")
     np.testing.assert_allclose(on_gpu(history), compiled(history), atol=2e-3)
     assert on_gpu.residual_after <= 1e-3
+
+
+def test_the_device_benchmark_runs_without_dolfinx(tmp_path):
+    """benchmarks/device_speed.py, the prepared script for a GPU machine (which has torch but no
+    dolfinx, PETSc or jsonschema), on a small scene: every part runs with those modules blocked,
+    and the torch step takes the compiled step's CG iterations to the same certificate."""
+    import subprocess
+    import sys
+
+    import pandas as pd
+
+    from ifenn.config import REPO
+
+    blocked = "import sys, runpy\nfor m in ('dolfinx', 'petsc4py', 'mpi4py', 'jsonschema', 'ufl', 'h5py'): sys.modules[m] = None\n"
+    script = REPO / "benchmarks" / "device_speed.py"
+    out = tmp_path / "device_speed.csv"
+    args = ["--pixels", "120", "--increments", "4", "--training-pixels", "64", "--cpu-epochs", "3", "--network-sizes", "64",
+            "--devices", "cpu", "--out", str(out)]
+    code = blocked + f"sys.argv = [{str(script)!r}] + {args!r}\nrunpy.run_path({str(script)!r}, run_name='__main__')\n"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO,
+                          env={**__import__("os").environ, "PYTHONPATH": str(REPO / "src")})
+    assert done.returncode == 0, done.stderr[-3000:]
+    table = pd.read_csv(out)
+    assert set(table.part) == {"training", "network", "verified"}
+    verified = table[table.part == "verified"].set_index("what")
+    assert (verified.max_certificate <= verified.tolerance).all()
+    for warm_start in ("previous", "increment") if _kernel() is not None else ():   # the compiled step's own algorithm
+        compiled, port = verified.loc[f"compiled, warm start {warm_start}"], verified.loc[f"torch, warm start {warm_start}"]
+        assert compiled.cg_iterations == port.cg_iterations and compiled.max_certificate == pytest.approx(port.max_certificate, rel=1e-3)

@@ -28,6 +28,8 @@ the step is reported (``residual_after``).
 
 from __future__ import annotations
 
+import functools
+import logging
 import time
 
 import numpy as np
@@ -37,6 +39,8 @@ import torch.nn.functional as F
 from ifenn.hybrid.verification import _DEFAULTS, WARM_STARTS
 from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
 
+log = logging.getLogger(__name__)
+
 #: Jacobi sweeps before and after the coarse correction, and on the coarsest level (the compiled V-cycle's)
 SMOOTH_SWEEPS, COARSEST_SWEEPS = 2, 30
 
@@ -44,6 +48,8 @@ SMOOTH_SWEEPS, COARSEST_SWEEPS = 2, 30
 def _ghosted(x: torch.Tensor, replicate: tuple[bool, bool, bool, bool]) -> torch.Tensor:
     """x (n, m) with a one-cell frame: zero (Dirichlet data 0), or the edge's own values on the
     sides (first row, last row, first column, last column) where ``replicate`` (zero flux)."""
+    if all(replicate):
+        return F.pad(x[None, None], (1, 1, 1, 1), mode="replicate")[0, 0]
     ext = F.pad(x, (1, 1, 1, 1))
     if replicate[0]:
         ext[0, 1:-1] = x[0]
@@ -71,15 +77,18 @@ class _Level:
             self.cut_w = torch.as_tensor(np.asarray(weights, dtype=np.float64), dtype=dtype, device=device)
             self.link_w = torch.as_tensor(np.where(np.asarray(cols) >= 0, weights, 0.0), dtype=dtype, device=device)
         self.D = 0.0
-        self.diag = self.inv = None
+        # written in place per solve: a captured CUDA graph reads them where they are
+        self.a = torch.zeros(self.shape, dtype=dtype, device=device)
+        self.diag, self.inv = torch.zeros_like(self.a), torch.zeros_like(self.a)
 
     def set_coefficients(self, a: torch.Tensor, D: float) -> None:
         """The level's operator a I - D (K9* - 3 I) with its cut links: diagonal a + 3 D - D sum w."""
         self.D = D
-        diag = (a + 3.0 * D).to(self.dtype)
+        self.a.copy_(a)
+        torch.add(self.a, 3.0 * D, out=self.diag)
         if self.n_cut:
-            diag = diag.reshape(-1).index_add(0, self.rows, -D * self.cut_w).reshape(self.shape)
-        self.diag, self.inv = diag, 1.0 / diag
+            self.diag.view(-1).index_add_(0, self.rows, -D * self.cut_w)
+        torch.reciprocal(self.diag, out=self.inv)
 
     def apply(self, x: torch.Tensor) -> torch.Tensor:
         """A x, x with zero Dirichlet data around the box (the padding on the image's edges)."""
@@ -140,12 +149,11 @@ class DeviceMultigrid:
 
     def set_coefficients(self, a: torch.Tensor, D: float) -> None:
         """Every level's coefficients for the finest ``a``: coarse a the mean of its children, D / 4."""
-        a = a.to(torch.float32)
         for k, level in enumerate(self.levels):
             level.set_coefficients(a, D)
             if k + 1 < len(self.levels):
                 i0, i1, j0, j1 = self.children[k]
-                top, bottom = a[i0], a[i1]
+                top, bottom = level.a[i0], level.a[i1]
                 a = 0.25 * (top[:, j0] + top[:, j1] + bottom[:, j0] + bottom[:, j1])
                 D = D / 4.0
 
@@ -174,6 +182,93 @@ class DeviceMultigrid:
         return level.jacobi(b, SMOOTH_SWEEPS, x)
 
 
+class _BoxCG:
+    """The conjugate gradients of one box (float64), on buffers kept between solves, so that on a
+    GPU an iteration is one captured CUDA graph (the launches of a V-cycle on a 600 x 600 image, a
+    thousand small kernels, cost more than their arithmetic); on the CPU the same iteration runs
+    eagerly. An iteration: q = A p, the step, the certificate max |r| / a; then, only while it
+    fails (always, inside a graph: the last V-cycle is then spare), the next V-cycle and direction."""
+
+    def __init__(self, level: _Level, grid: DeviceMultigrid):
+        self.level, self.grid = level, grid
+        zeros = functools.partial(torch.zeros, level.shape, dtype=torch.float64, device=level.a.device)
+        self.r, self.z, self.p, self.delta, self.inv_a = zeros(), zeros(), zeros(), zeros(), zeros()
+        self.rz = torch.zeros((), dtype=torch.float64, device=level.a.device)
+        self.worst = torch.zeros((), dtype=torch.float64, device=level.a.device)
+        self.graph = None
+        # fused: every iteration also prepares the next direction, as the graph does (on the CPU
+        # only to test the captured iteration's arithmetic)
+        self.use_graph = self.fused = level.a.device.type == "cuda"
+
+    def start(self) -> float:
+        """delta = 0 and the certificate of the box's residual (``r``, set by the caller)."""
+        self.delta.zero_()
+        torch.amax(self.r.abs() * self.inv_a, out=self.worst)
+        return float(self.worst)
+
+    def _precondition(self) -> None:
+        self.z.copy_(self.grid.vcycle(self.r.to(torch.float32)))
+
+    def first_direction(self) -> None:
+        self._precondition()
+        self.p.copy_(self.z)
+        self.rz.copy_(torch.sum(self.r * self.z))
+
+    def _update(self) -> None:
+        q = self.level.apply(self.p)
+        alpha = self.rz / torch.sum(self.p * q)
+        self.delta.add_(alpha * self.p)
+        self.r.sub_(alpha * q)
+        torch.amax(self.r.abs() * self.inv_a, out=self.worst)
+
+    def _next_direction(self) -> None:
+        self._precondition()
+        rz_new = torch.sum(self.r * self.z)
+        self.p.mul_(rz_new / self.rz).add_(self.z)
+        self.rz.copy_(rz_new)
+
+    def _iteration(self) -> None:
+        self._update()
+        self._next_direction()
+
+    def iterate(self, target: float) -> float:
+        """One iteration; returns its certificate (the one sync of an iteration)."""
+        if self.use_graph and self.graph is None:
+            self._capture()
+        if self.graph is not None:
+            self.graph.replay()
+            return float(self.worst)
+        if self.fused:
+            self._iteration()
+            return float(self.worst)
+        self._update()
+        worst = float(self.worst)
+        if worst > target:
+            self._next_direction()
+        return worst
+
+    def _capture(self) -> None:
+        """Record an iteration as a CUDA graph (after warm-up runs on a side stream, which move the
+        state: it is put back). Where capture fails, the iterations run eagerly, and the log says so."""
+        state = [t.clone() for t in (self.r, self.z, self.p, self.delta, self.rz, self.worst)]
+        try:
+            stream = torch.cuda.Stream()
+            stream.wait_stream(torch.cuda.current_stream())
+            with torch.cuda.stream(stream):
+                for _ in range(2):
+                    self._iteration()
+            torch.cuda.current_stream().wait_stream(stream)
+            graph = torch.cuda.CUDAGraph()
+            with torch.cuda.graph(graph):
+                self._iteration()
+            self.graph = graph
+        except Exception as error:   # noqa: BLE001 (whatever the capture raised; pragma: a GPU's)
+            log.warning("CUDA graph capture of the correction failed (%s): its iterations run eagerly", error)
+            self.use_graph = False
+        for buffer, saved in zip((self.r, self.z, self.p, self.delta, self.rz, self.worst), state, strict=True):
+            buffer.copy_(saved)
+
+
 class DevicePixelEquation:
     """The pixel equation of one image in torch on ``device`` (float64): the whole image's
     residual and box solves (:class:`ifenn.hybrid.verification.PixelEquation`'s, same operator,
@@ -192,7 +287,7 @@ class DevicePixelEquation:
         if self.cuts is not None:
             self._cuts_t = (torch.as_tensor(self.cuts.rows, device=self.device), torch.as_tensor(self.cuts.cols, device=self.device),
                             torch.as_tensor(self.cuts.weights, dtype=torch.float64, device=self.device))
-        self._grids: dict = {}   # box -> (finest level in float64, its multigrid)
+        self._grids: dict = {}   # box -> its CG (finest level in float64, multigrid, buffers, graph)
 
     def residual(self, phi: torch.Tensor, history: torch.Tensor, normalised: bool = True) -> torch.Tensor:
         """R = a phi - D (K9*(phi) - 3 phi) - 2 H on the whole image (the slits' links cut), or R / a."""
@@ -207,7 +302,7 @@ class DevicePixelEquation:
             residual = residual + self.diffusion * flux.reshape(phi.shape)
         return residual / a if normalised else residual
 
-    def _grid(self, box: Box, image_shape) -> tuple[_Level, DeviceMultigrid]:
+    def _grid(self, box: Box, image_shape) -> _BoxCG:
         key = (box[0].start, box[0].stop, box[1].start, box[1].stop)
         if key not in self._grids:
             ny, nx = image_shape
@@ -223,42 +318,30 @@ class DevicePixelEquation:
                     links.append(self.cuts.coarse_links(box, len(links), coarse))
             if len(self._grids) > 16:
                 self._grids.clear()
-            self._grids[key] = (_Level(shape, replicate, links[0], torch.float64, self.device),
-                                DeviceMultigrid(shape, replicate, links, self.device))
+            self._grids[key] = _BoxCG(_Level(shape, replicate, links[0], torch.float64, self.device),
+                                      DeviceMultigrid(shape, replicate, links, self.device))
         return self._grids[key]
 
     def solve_box(self, phi: torch.Tensor, history: torch.Tensor, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
         """Solve the pixel equation on ``box`` in place in ``phi`` (the values around it fixed) to
         max |r| <= ``target`` inside it: CG in float64 preconditioned with one float32 V-cycle.
         Returns (max |r| reached, iterations); raises if ``maxiter`` iterations do not get there."""
-        level, grid = self._grid(box, phi.shape)
+        cg = self._grid(box, phi.shape)
         a = self.reaction0 + 2.0 * history[box]
-        level.set_coefficients(a, self.diffusion)
-        grid.set_coefficients(a, self.diffusion)
-        inv_a = 1.0 / a
-        r = -self.residual(phi, history, normalised=False)[box]   # the correction solves A delta = -R(phi)
-        delta = torch.zeros_like(r)
-        worst = float((r.abs() * inv_a).max())
-        iterations = 0
+        cg.level.set_coefficients(a, self.diffusion)
+        cg.grid.set_coefficients(a, self.diffusion)
+        torch.reciprocal(a, out=cg.inv_a)
+        cg.r.copy_(-self.residual(phi, history, normalised=False)[box])   # the correction solves A delta = -R(phi)
+        worst, iterations = cg.start(), 0
         if worst > target:
-            z = grid.vcycle(r.to(torch.float32)).to(torch.float64)
-            p, rz = z, torch.sum(r * z)
-            while True:
+            cg.first_direction()
+            while worst > target:
                 if iterations == maxiter:
                     raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                        f"(reached {worst:g})")
                 iterations += 1
-                q = level.apply(p)
-                alpha = rz / torch.sum(p * q)
-                delta = delta + alpha * p
-                r = r - alpha * q
-                worst = float((r.abs() * inv_a).max())   # the one sync per iteration: the certificate
-                if worst <= target:
-                    break
-                z = grid.vcycle(r.to(torch.float32)).to(torch.float64)
-                rz_new = torch.sum(r * z)
-                p, rz = z + (rz_new / rz) * p, rz_new
-        phi[box] += delta
+                worst = cg.iterate(target)
+        phi[box] += cg.delta
         return worst, iterations
 
 
@@ -299,6 +382,9 @@ class DeviceVerifiedInference:
     ``t_check``, ``t_correction``, ``t_network``, ``evaluated_fraction``). ``model``: the PICNN
     (on ``device``), or None with ``warm_start='previous'``."""
 
+    #: correction boxes over more than this share of the image: the whole image instead (as the
+    #: CPU step); on a GPU every correction is on the whole image (``global_fraction`` 0: one
+    #: shape, so one captured graph, and a pixel costs less than a launch there)
     GLOBAL_FRACTION = 0.5
 
     def __init__(self, model, equation: DevicePixelEquation, tolerance: float = _DEFAULTS["tolerance"],
@@ -320,6 +406,7 @@ class DeviceVerifiedInference:
         self.cap_history = bool(cap_history)
         self.sigma, self.truncate = sigma, truncate
         self.kernel = "" if model is None else "conv2d"
+        self.global_fraction = 0.0 if self.device.type == "cuda" else self.GLOBAL_FRACTION
         self.phi = self.prediction = None   # last verified phi, last network prediction (tensors on the device)
         self.t_network = self.t_check = self.t_correction = 0.0
         self.evaluated_fraction = self.corrected_fraction = self.failing_fraction = 0.0
@@ -377,7 +464,7 @@ class DeviceVerifiedInference:
             box = _bounding_box(failing, margin)
             if box is None:
                 break
-            if box_area(box) > self.GLOBAL_FRACTION * size:
+            if box_area(box) > self.global_fraction * size:
                 box = (slice(0, history.shape[0]), slice(0, history.shape[1]))
             _, iterations = equation.solve_box(phi, history, box, self.solve_fraction * self.tolerance)
             self.solve_iterations += iterations

@@ -1,0 +1,185 @@
+"""The GPU issue's figures in one run, per device side by side (the CPU, and CUDA where torch sees
+one): training of the default PICNN preset, the network on the whole image, and the verified
+phase-field step (check + multigrid-PCG correction) on a crack growing across an image of
+snt3's size. Self-contained: it needs torch, numpy, scipy, pandas and pyyaml, no dolfinx and no
+results/ (the prepared script for a GPU machine):
+
+    PYTHONPATH=src OMP_NUM_THREADS=1 python3 benchmarks/device_speed.py [--pixels 600] [--increments 30]
+        [--devices cpu cuda] [--training-pixels 400] [--cpu-epochs 50] [--out results/benchmarks/device_speed.csv]
+
+What each row is (column ``part``):
+
+* ``training``: the default preset (config ``picnn.preset``) on two synthetic snt-like history
+  maps of --training-pixels (``ifenn.network.training.synthetic_history``), seed 0, one torch
+  thread on the CPU. On a GPU the whole preset runs; on the CPU --cpu-epochs of it, and
+  ``wall_s`` is extrapolated linearly to the preset's epochs (``extrapolated`` = True says so).
+* ``network``: the trained network on the whole image (its convolutions, float32), median of 20
+  calls after 3 warm-ups, per image size (--gpu-network-sizes too on a GPU); CUDA calls synchronised.
+* ``verified``: the verified step (tolerance and settings of config ``ifenn.verification``) on
+  --increments images of a crack growing across --pixels x --pixels (h_px = 1 / --pixels, the
+  history the running maximum), one step per image: ``compiled`` = the CPU's compiled check and
+  correction (:mod:`ifenn.hybrid.verification`, the workflow's CPU step), ``torch`` = the same
+  step in torch on the device (:mod:`ifenn.hybrid.device_step`, the workflow's GPU step), each
+  with warm starts ``previous`` (no network) and ``increment`` (the trained network's change).
+  Median ms per step over the increments after the first (the first checks a cold start), CG
+  iterations per step, the largest certificate max |r| (<= tolerance, else the step was reported).
+
+FEM's phase-field step is not here (dolfinx runs on the CPU machine only): compare with
+``t_phase_field_s`` of FEM in results/benchmarks/phase_field_speed.csv, measured there, and say so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def crack_sequence(n_px: int, increments: int, lc: float) -> list[np.ndarray]:
+    """History images of a crack growing from the left edge to past the centre (running maximum)."""
+    from ifenn.network.training import synthetic_history
+
+    images, previous = [], None
+    for x_tip in np.linspace(-0.15, 0.1, increments):
+        history = synthetic_history(n_px=n_px, h_px=1.0 / n_px, x_tip=float(x_tip), lc=lc)
+        previous = history if previous is None else np.maximum(history, previous)
+        images.append(previous)
+    return images
+
+
+def training_rows(devices, settings_name: str, n_px: int, cpu_epochs: int, Gc: float, lc: float):
+    from ifenn.device import describe
+    from ifenn.network.settings import resolve_settings
+    from ifenn.network.training import synthetic_history, train_picnn
+
+    h_px = 1.0 / n_px
+    maps = [synthetic_history(n_px=n_px, h_px=h_px, x_tip=x, lc=lc) for x in (-0.05, 0.0)]
+    rows, models = [], {}
+    for device in devices:
+        settings = resolve_settings({"preset": settings_name})
+        epochs = settings["epochs"] + (settings["full_image_epochs"] if settings["sampling"] == "tiles" else 0)
+        short = device.type == "cpu" and cpu_epochs < epochs
+        if short:
+            settings["epochs"], settings["full_image_epochs"] = cpu_epochs, 0
+        model, log = train_picnn(maps, h_px, Gc, lc, settings, seed=0, threads=1, progress=False, device=device)
+        wall = float(log.wall_s.iloc[-1])
+        rows.append({"part": "training", "device": describe(device), "what": f"preset {settings_name}, {n_px} px",
+                     "epochs_run": len(log), "wall_s": wall * epochs / len(log) if short else wall, "extrapolated": short,
+                     "final_loss": float(log.loss.iloc[-1])})
+        models[device.type] = model
+        print(f"training {settings_name} on {describe(device)}: {len(log)} epochs in {wall:.1f} s", flush=True)
+    return rows, models
+
+
+def network_rows(model, devices, sizes, gpu_sizes=()):
+    from ifenn.device import describe
+
+    rows = []
+    for device in devices:
+        net = model.to(device).eval()
+        for n in list(sizes) + (list(gpu_sizes) if device.type == "cuda" else []):
+            history = torch.rand((1, 1, n, n), device=device) * 1e3
+            times = []
+            with torch.no_grad():
+                for k in range(23):
+                    _sync(device)
+                    started = time.perf_counter()
+                    net.phase_field(history)
+                    _sync(device)
+                    if k >= 3:
+                        times.append(time.perf_counter() - started)
+            rows.append({"part": "network", "device": describe(device), "what": f"{n} x {n}", "pixels": n * n,
+                         "median_ms": 1e3 * float(np.median(times))})
+            print(f"network {n} x {n} on {describe(device)}: {rows[-1]['median_ms']:.3g} ms", flush=True)
+    model.to("cpu")
+    return rows
+
+
+def verified_rows(model, devices, images, verification: dict, Gc: float, lc: float, history_cap: float, sigma: float):
+    from ifenn.device import describe
+    from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
+    from ifenn.hybrid.process_zone import FullInference
+    from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+
+    n_px = images[0].shape[0]
+    h_px = 1.0 / n_px
+    settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"])
+    rows = []
+    variants = [("compiled", torch.device("cpu"))] + [("torch", device) for device in devices]
+    for (backend, device), warm_start in ((v, w) for v in variants for w in ("previous", "increment")):
+        if backend == "compiled":
+            network = None if warm_start == "previous" else FullInference(model.to("cpu").predict, sigma, 4.0, "conv2d")
+            step = VerifiedInference(network, PixelEquation(Gc, lc, h_px), *settings, warm_start, history_cap)
+        else:
+            net = None if warm_start == "previous" else model.to(device).eval()
+            step = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start, history_cap,
+                                           sigma=sigma)
+        times, iterations, certificate = [], [], 0.0
+        for k, history in enumerate(images):
+            _sync(device)
+            started = time.perf_counter()
+            step(history)
+            _sync(device)
+            if k > 0:
+                times.append(time.perf_counter() - started)
+                iterations.append(step.solve_iterations)
+            certificate = max(certificate, step.residual_after)
+        rows.append({"part": "verified", "device": describe(device), "what": f"{backend}, warm start {warm_start}", "pixels": n_px**2,
+                     "median_ms": 1e3 * float(np.median(times)), "mean_ms": 1e3 * float(np.mean(times)),
+                     "cg_iterations": float(np.mean(iterations)), "max_certificate": certificate,
+                     "tolerance": verification["tolerance"]})
+        print(f"verified {backend} {warm_start} on {describe(device)}: {rows[-1]['median_ms']:.3g} ms, "
+              f"{rows[-1]['cg_iterations']:.2f} CG its, max |r| {certificate:.2e}", flush=True)
+    model.to("cpu")
+    return rows
+
+
+def main() -> int:
+    cli = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    cli.add_argument("--config", default=str(REPO / "config" / "config.yaml"))
+    cli.add_argument("--pixels", type=int, default=600, help="the verified step's image side (snt3: 600)")
+    cli.add_argument("--increments", type=int, default=30)
+    cli.add_argument("--training-pixels", type=int, default=400, help="the training maps' side (snt1-I: 400)")
+    cli.add_argument("--cpu-epochs", type=int, default=50, help="epochs run on the CPU (extrapolated to the preset's)")
+    cli.add_argument("--network-sizes", type=int, nargs="+", default=[400, 600, 1200])
+    cli.add_argument("--gpu-network-sizes", type=int, nargs="+", default=[2400, 4800], help="more sizes, on a GPU only")
+    cli.add_argument("--devices", nargs="+", default=None, choices=["cpu", "cuda"],
+                     help="default: cpu, and cuda where torch sees one")
+    cli.add_argument("--out", default="results/benchmarks/device_speed.csv")
+    args = cli.parse_args()
+    from ifenn.device import default_devices, resolve_device
+    from ifenn.io import atomic_path
+
+    torch.set_num_threads(1)
+    devices = [resolve_device(d, "--devices") for d in args.devices] if args.devices else default_devices()
+    config = yaml.safe_load(Path(args.config).read_text())   # read plainly: the config checks need packages a GPU machine lacks
+    Gc, lc = config["material"]["Gc"], config["material"]["lc"]
+    ifenn = config["ifenn"]
+    rows, models = training_rows(devices, config["picnn"]["preset"], args.training_pixels, args.cpu_epochs, Gc, lc)
+    model = models.get("cuda", models["cpu"] if "cpu" in models else next(iter(models.values())))
+    rows += network_rows(model, devices, args.network_sizes, args.gpu_network_sizes)
+    images = crack_sequence(args.pixels, args.increments, lc)
+    rows += verified_rows(model, devices, images, ifenn["verification"], Gc, lc, ifenn["history_cap"], ifenn["smoothing_sigma"])
+    table = pd.DataFrame(rows)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(args.out) as tmp:
+        table.to_csv(tmp, index=False)
+    with pd.option_context("display.width", 220, "display.max_columns", 20, "display.float_format", "{:.4g}".format):
+        print(table.to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
