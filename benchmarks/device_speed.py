@@ -17,10 +17,12 @@ What each row is (column ``part``):
   calls after 3 warm-ups, per image size (--gpu-network-sizes too on a GPU); CUDA calls synchronised.
 * ``verified``: the verified step (tolerance and settings of config ``ifenn.verification``) on
   --increments images of a crack growing across --pixels x --pixels (h_px = 1 / --pixels, the
-  history the running maximum), one step per image: ``compiled`` = the CPU's compiled check and
-  correction (:mod:`ifenn.hybrid.verification`, the workflow's CPU step), ``torch`` = the same
-  step in torch on the device (:mod:`ifenn.hybrid.device_step`, the workflow's GPU step), each
-  with warm starts ``previous`` (no network) and ``increment`` (the trained network's change).
+  history the running maximum), one step per image: ``compiled`` = the workflow's CPU step (the
+  compiled check and correction of :mod:`ifenn.hybrid.verification`, the network in its compiled
+  orbit kernel asked again only where the local phi moved by ``network_tolerance``), ``torch`` =
+  the workflow's GPU step (:mod:`ifenn.hybrid.device_step`, the network's convolutions on the
+  whole image, its answer taken where the compiled step would ask it), each with warm starts ``previous`` (no network) and ``increment`` (the trained
+  network's change added to the last verified phi).
   Median ms per step over the increments after the first (the first checks a cold start), CG
   iterations per step, the largest certificate max |r| (<= tolerance, else the step was reported).
 
@@ -107,11 +109,12 @@ def network_rows(model, devices, sizes, gpu_sizes=()):
     return rows
 
 
-def verified_rows(model, devices, images, verification: dict, Gc: float, lc: float, history_cap: float, sigma: float):
+def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: float, lc: float, history_cap: float, sigma: float):
     from ifenn.device import describe
     from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
-    from ifenn.hybrid.process_zone import FullInference
+    from ifenn.hybrid.process_zone import ProcessZoneInference
     from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+    from ifenn.network.orbit import make_evaluator
 
     n_px = images[0].shape[0]
     h_px = 1.0 / n_px
@@ -119,13 +122,16 @@ def verified_rows(model, devices, images, verification: dict, Gc: float, lc: flo
     rows = []
     variants = [("compiled", torch.device("cpu"))] + [("torch", device) for device in devices]
     for (backend, device), warm_start in ((v, w) for v in variants for w in ("previous", "increment")):
-        if backend == "compiled":
-            network = None if warm_start == "previous" else FullInference(model.to("cpu").predict, sigma, 4.0, "conv2d")
+        if backend == "compiled":   # the workflow's CPU step: the network in its orbit kernel, asked on the process zone
+            network = None
+            if warm_start != "previous":
+                network = ProcessZoneInference(make_evaluator(model.to("cpu"), "orbit"), sigma, 4.0, verification["network_tolerance"],
+                                               zone["refresh_every"], zone["full_fraction"], local_scale=Gc / lc, shape=images[0].shape)
             step = VerifiedInference(network, PixelEquation(Gc, lc, h_px), *settings, warm_start, history_cap)
         else:
             net = None if warm_start == "previous" else model.to(device).eval()
             step = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start, history_cap,
-                                           sigma=sigma)
+                                           sigma=sigma, network_tolerance=verification["network_tolerance"])
         times, iterations, certificate = [], [], 0.0
         for k, history in enumerate(images):
             _sync(device)
@@ -171,7 +177,8 @@ def main() -> int:
     model = models.get("cuda", models["cpu"] if "cpu" in models else next(iter(models.values())))
     rows += network_rows(model, devices, args.network_sizes, args.gpu_network_sizes)
     images = crack_sequence(args.pixels, args.increments, lc)
-    rows += verified_rows(model, devices, images, ifenn["verification"], Gc, lc, ifenn["history_cap"], ifenn["smoothing_sigma"])
+    rows += verified_rows(model, devices, images, ifenn["verification"], ifenn["process_zone"], Gc, lc, ifenn["history_cap"],
+                         ifenn["smoothing_sigma"])
     table = pd.DataFrame(rows)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(args.out) as tmp:

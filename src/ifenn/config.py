@@ -293,6 +293,11 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
     for run in config.get("phase_field_benchmark", {}).get("runs", []):
         if run not in config.get("ifenn_runs", {}):
             problems.append(f"config key 'phase_field_benchmark.runs': '{run}' is not an IFENN run; allowed: {sorted(config.get('ifenn_runs', {}))}")
+    for run in config.get("network_worth", {}).get("runs", []):
+        entry = config.get("ifenn_runs", {}).get(run)
+        if entry is None or not (entry.get("verification") or {}).get("enabled", False):
+            verified = sorted(r for r, e in config.get("ifenn_runs", {}).items() if (e.get("verification") or {}).get("enabled", False))
+            problems.append(f"config key 'network_worth.runs': '{run}' is not a verified IFENN run; allowed: {verified}")
     for run in config.get("error_sources", {}).get("runs", []):
         entry = config.get("ifenn_runs", {}).get(run)
         if entry is None:

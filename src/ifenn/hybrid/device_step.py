@@ -391,7 +391,7 @@ class DeviceVerifiedInference:
                  margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
                  solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"],
                  history_cap: float | None = None, cap_history: bool = _DEFAULTS["cap_history"],
-                 sigma: float | None = None, truncate: float = 4.0):
+                 sigma: float | None = None, truncate: float = 4.0, network_tolerance: float | None = None):
         if warm_start not in WARM_STARTS:
             raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
         if warm_start != "previous" and model is None:
@@ -405,6 +405,13 @@ class DeviceVerifiedInference:
         self.history_cap = None if history_cap is None else float(history_cap)
         self.cap_history = bool(cap_history)
         self.sigma, self.truncate = sigma, truncate
+        # the network's answer is taken only where its input's local phi moved by network_tolerance since
+        # it was last taken there, and within the network's reach and the smoothing's radius of such pixels
+        self.network_tolerance = network_tolerance
+        # (the CPU's process zone rewrites the inputs within the reach of such pixels: the outputs within twice it change)
+        reach = sum(layer.kernel_size // 2 for layer in getattr(model, "layers", ()))
+        self.zone_radius = 2 * reach + (int(truncate * float(sigma) + 0.5) if sigma else 0)
+        self.reference = None   # per pixel, the local phi of the input when the network's answer was last taken
         self.kernel = "" if model is None else "conv2d"
         self.global_fraction = 0.0 if self.device.type == "cuda" else self.GLOBAL_FRACTION
         self.phi = self.prediction = None   # last verified phi, last network prediction (tensors on the device)
@@ -435,8 +442,19 @@ class DeviceVerifiedInference:
                 return 2.0 * history / (self.equation.reaction0 + 2.0 * history)
             return self.phi.clone()
         prediction = self._network(capped)
-        if self.prediction is None or self.phi is None or self.warm_start == "network":
-            candidate = prediction.clone()
+        local = 2.0 * capped / (self.equation.reaction0 + 2.0 * capped)
+        if self.prediction is None or self.phi is None:
+            self.prediction, self.reference = prediction, local
+            return prediction.clone()
+        if self.network_tolerance is not None:   # the CPU's process zone, as a mask on the whole image's answer
+            moved = (local - self.reference).abs() > self.network_tolerance
+            self.reference = torch.where(moved, local, self.reference)
+            radius = self.zone_radius
+            zone = F.max_pool2d(moved[None, None].to(torch.float32), 2 * radius + 1, stride=1, padding=radius)[0, 0] > 0
+            prediction = torch.where(zone, prediction, self.prediction)
+            self.evaluated_fraction = float(zone.float().mean())
+        if self.warm_start == "network":
+            candidate = torch.where(prediction != self.prediction, prediction, self.phi)
         else:   # "increment": the network's change added to the last verified phi
             candidate = self.phi + (prediction - self.prediction)
         self.prediction = prediction

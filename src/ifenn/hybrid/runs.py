@@ -116,7 +116,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             device = resolve_device(device)
             model = load_picnn(model_path, device)[0] if warm_start != "previous" else None
             equation = DevicePixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec), device)
-            return DeviceVerifiedInference(model, equation, *settings, sigma=spec["smoothing_sigma"], truncate=spec["smoothing_truncate"])
+            return DeviceVerifiedInference(model, equation, *settings, sigma=spec["smoothing_sigma"], truncate=spec["smoothing_truncate"],
+                                           network_tolerance=verification.get("network_tolerance"))
         network = None
         if warm_start != "previous":
             # the network only warm-starts a certified correction: how often it is asked is its own setting

@@ -1,0 +1,43 @@
+"""What a network is worth to the verified step (ifenn.studies.network_worth), on the quick snt1-I
+scene: every warm start replayed on the loop's own history images ends with the same certificate,
+and the oracle that knows the exact solution leaves the correction nothing to do."""
+
+import pytest
+import torch
+from conftest import quick_fem_run
+
+from ifenn.config import ifenn_run_spec
+from ifenn.network.picnn import PICNN, InputScaling, save_picnn
+from ifenn.studies.network_worth import VARIANTS, network_worth
+
+
+@pytest.fixture(scope="module")
+def worth(quick_config, tmp_path_factory):
+    spec, tmp, _ = quick_fem_run(quick_config, tmp_path_factory, "snt1-I", "worth")
+    run = ifenn_run_spec(quick_config, "snt1-I-verified")
+    torch.manual_seed(0)
+    net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
+    model = tmp / "random.pt"   # an untrained network: the check must hold whatever it answers
+    save_picnn(net, model, spec["scene"]["domain"]["x"][1] / spec["scene"]["elements"][0], 2.7, quick_config["material"]["lc"], "test")
+    summary, rows = network_worth([run], {run["name"]: {"mesh": tmp / "mesh.xdmf", "fem_dir": tmp / "fem"}}, model, increments=6)
+    return run, summary, rows
+
+
+def test_every_warm_start_ends_with_the_same_certificate(worth):
+    run, summary, rows = worth
+    tolerance = run["verification"]["tolerance"]
+    assert list(summary.variant) == list(VARIANTS)
+    assert (rows.residual_after <= tolerance).all()
+    assert (summary.increments == 5).all() and (summary.t_step_s > 0).all()
+    no_network = summary.set_index("variant").loc["no network"]
+    assert no_network.cg_iterations > 0 and no_network.speedup_vs_no_network == pytest.approx(1.0)
+
+
+def test_the_oracle_leaves_nothing_to_correct(worth):
+    """The exact pixel solution as the warm start: the check passes at once (the oracles' answers
+    cost nothing; the paper's network is asked and timed)."""
+    _, summary, rows = worth
+    oracle = rows[rows.variant == "oracle everywhere"]
+    assert (oracle.cg_iterations == 0).all() and (oracle.residual_before <= 1e-8).all()
+    by = summary.set_index("variant")
+    assert by.loc["oracle everywhere", "t_network_s"] == 0 and by.loc["paper's network", "t_network_s"] > 0
