@@ -55,6 +55,7 @@ rule all:
         ["results/tables/stability.csv", "results/figures/stability_map.png"] if config.get("stability") else [],
         ["results/tables/speed_accuracy.csv", "results/figures/speed_accuracy.png"] if config.get("speed_accuracy") else [],
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],
+        ["results/benchmarks/network_worth.csv", "results/figures/network_worth.png"] if config.get("network_worth") else [],
         ["results/tables/error_sources.csv", "results/figures/error_sources.png"] if config.get("error_sources") else [],
         "results/benchmarks/increment_speed.csv" if config.get("increment_benchmark") else [],
         ["results/tables/whole_path.csv", "results/figures/whole_path.png"] if config.get("whole_path") else [],

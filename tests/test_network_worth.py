@@ -41,3 +41,11 @@ def test_the_oracle_leaves_nothing_to_correct(worth):
     assert (oracle.cg_iterations == 0).all() and (oracle.residual_before <= 1e-8).all()
     by = summary.set_index("variant")
     assert by.loc["oracle everywhere", "t_network_s"] == 0 and by.loc["paper's network", "t_network_s"] > 0
+
+
+def test_the_figure_shows_every_run(worth, tmp_path):
+    from ifenn.studies.plots import network_worth_figure
+
+    _, summary, _ = worth
+    network_worth_figure(summary, tmp_path / "worth.png")
+    assert (tmp_path / "worth.png").stat().st_size > 10_000

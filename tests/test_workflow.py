@@ -89,6 +89,13 @@ def test_quick_profile_issue5_results(quick_workflow):
     # the orbit evaluation is the same network: the same forces as the convolutions
     final = speed.pivot(index="run", columns="method", values="final_force")
     assert ((final.ifenn_full - final.ifenn_full_convolution).abs() < 1e-3 * final.fem).all()
+    # what a network is worth to the verified step: every warm start to the same certificate, the oracle corrects nothing
+    from ifenn.studies.network_worth import VARIANTS
+
+    worth = pd.read_csv(results / "benchmarks" / "network_worth.csv")
+    assert set(worth.variant) == set(VARIANTS) and worth.run.nunique() == 3 and (worth.max_certificate <= 1e-3).all()
+    assert (worth[worth.variant == "oracle everywhere"].cg_iterations == 0).all()
+    assert (results / "figures" / "network_worth.png").stat().st_size > 10_000
 
 
 def test_quick_profile_error_sources(quick_workflow):

@@ -103,6 +103,32 @@ rule phase_field_benchmark:
         " --verification {params.verification} --out {output} > {log} 2>&1"
 
 
+rule network_worth_benchmark:
+    input:
+        ifenn_specs=lambda w: [f"results/ifenn/{r}/spec.json" for r in config["network_worth"]["runs"]],
+        fem=lambda w: [f"results/fem/{config['ifenn_runs'][r]['fem_run']}/fields.h5" for r in config["network_worth"]["runs"]],
+        model="results/picnn/model.pt",
+    output:
+        table=report("results/benchmarks/network_worth.csv", caption="../report/network_worth.rst", category="Speed and accuracy"),
+        increments="results/benchmarks/network_worth_increments.csv",
+        figure=report("results/figures/network_worth.png", caption="../report/network_worth.rst", category="Speed and accuracy"),
+    params:
+        python=PYTHON,
+        script=os.path.join(workflow.basedir, "benchmarks", "network_worth.py"),
+        increments=config.get("network_worth", {}).get("increments", 40),
+    # all cores: nothing else runs while it measures
+    threads: all_cores
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/benchmarks/network_worth.log",
+    benchmark:
+        "benchmarks/speed/network_worth.tsv"
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} {params.script} --model {input.model} --specs {input.ifenn_specs}"
+        " --increments {params.increments} --out {output.table} --figure {output.figure} > {log} 2>&1"
+
+
 rule increment_benchmark:
     input:
         ifenn_specs=lambda w: [f"results/ifenn/{r}/spec.json" for r in config["increment_benchmark"]["runs"]],

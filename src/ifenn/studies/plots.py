@@ -643,3 +643,32 @@ def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> 
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     _save(fig, path)
+
+
+def network_worth_figure(summary, path, target: float = 1.5) -> None:
+    """What a network is worth to the verified step (ifenn.studies.network_worth), one panel per run:
+    the step's time per warm start against the share of the image where the predictor answers,
+    with the step without a network and the issue's target (``target`` x faster) as lines. The oracles
+    answer exactly and for free: no network asked on a zone can do better than its oracle there."""
+    runs = list(dict.fromkeys(summary.run))
+    fig, axes = plt.subplots(1, len(runs), figsize=(4.6 * len(runs), 4.0), squeeze=False)
+    markers = {"no network": "s", "paper's network": "o", "paper's network, whole image": "D", "extrapolation": "^"}
+    for ax, run in zip(axes[0], runs, strict=True):
+        rows = summary[summary.run == run]
+        base = float(rows[rows.variant == "no network"].t_step_s.iloc[0]) * 1e3
+        ax.axhline(base, color="0.3", lw=1, label="no network")
+        ax.axhline(base / target, color="tab:red", lw=1, ls="--", label=f"target: {target:g}x faster")
+        oracles = rows[rows.variant.str.startswith("oracle")]
+        ax.plot(oracles.evaluated_fraction, oracles.t_step_s * 1e3, "k:", marker="*", ms=10, label="oracle (exact, free) on a zone")
+        for _, row in rows[~rows.variant.str.startswith("oracle")].iterrows():
+            ax.plot(row.evaluated_fraction, row.t_step_s * 1e3, markers.get(row.variant, "x"), ms=8,
+                    label=f"{row.variant} ({row.cg_iterations:.2f} CG it.)")
+        ax.set_xscale("symlog", linthresh=1e-3)
+        ax.set_xlim(-1e-4, 1.5)
+        ax.set_ylim(bottom=0)
+        ax.set_xlabel("share of the image the predictor answers")
+        ax.set_ylabel("verified step, ms (median)")
+        ax.set_title(f"{run}, {int(rows.pixels.iloc[0]):,} pixels", fontsize=9)
+        ax.legend(fontsize=6.5, loc="upper left")
+    fig.suptitle("What a network is worth to the verified step (one core; same certificate for every warm start)", fontsize=10)
+    _save(fig, path)
