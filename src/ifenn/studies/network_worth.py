@@ -19,6 +19,10 @@ Variants (column ``variant``):
   phi moved by ``network_tolerance``; its time included).
 * ``paper's network, whole image``: the same, the network asked on the whole image every step (its
   compiled orbit kernel): what a network on the whole image costs here.
+* ``change network``: a network trained for this job (:mod:`ifenn.network.change_net`: fed the
+  check's residual of the last verified phi under the new history and that phi, it answers the
+  change; trained with the check's own norm on the first half of the first run's loop, the states
+  of the "no network" replay), on the whole image every step, its time included.
 * ``extrapolation``: no network, the last verified phi plus its last change (phi_k + (phi_k -
   phi_k-1)): what predicting the change costs nothing to try.
 * ``oracle in the zone``: the exact pixel solution of the new history, taken where the paper's
@@ -45,8 +49,10 @@ import pandas as pd
 
 #: the oracle asked on wider zones: the local phi's tolerance of the paper's zone (network_tolerance), then finer
 ORACLE_ZONE_TOLERANCES = (None, 1e-2, 1e-3)
-VARIANTS = ("no network", "paper's network", "paper's network, whole image", "extrapolation",
+VARIANTS = ("no network", "paper's network", "paper's network, whole image", "change network", "extrapolation",
             *(f"oracle in the zone{'' if t is None else f' {t:g}'}" for t in ORACLE_ZONE_TOLERANCES), "oracle everywhere")
+#: the change network's training (ifenn.network.change_net.train_change_net): on the first run's loop, its first half
+CHANGE_NET_TRAINING = {"channels": (2, 8, 8, 1), "epochs": 300, "crop": 64, "crops_per_state": 2, "lr": 3e-3, "seed": 0}
 
 
 class _Recorder:
@@ -143,9 +149,12 @@ class _Zone:
         return scipy.ndimage.maximum_filter(moved, size=2 * self.radius + 1, mode="constant")
 
 
-def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images: list, variant: str, exact: list | None = None) -> pd.DataFrame:
+def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images: list, variant: str, exact: list | None = None,
+           change_net=None, verified_phis: list | None = None) -> pd.DataFrame:
     """Per increment: the correction's CG iterations and work, the step's times and certificate, for
-    ``variant`` on the recorded sequence (``exact``: the exact pixel solutions, for the oracles)."""
+    ``variant`` on the recorded sequence (``exact``: the exact pixel solutions, for the oracles;
+    ``change_net``: the trained :class:`ifenn.network.change_net.ChangeNet`). ``verified_phis``: a
+    list that receives the verified phi of every step."""
     from ifenn.hybrid.runs import _network_inference, slit_cuts
     from ifenn.hybrid.verification import PixelEquation, VerifiedInference
 
@@ -162,6 +171,12 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
             run = {**spec, "inference": "full", "evaluation": "orbit"}
         network = _network_inference(run, model_path, h_px, start.shape, "cpu")
         step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
+    elif variant == "change network":
+        from ifenn.network.change_net import ChangeNetWarmStart
+
+        network = ChangeNetWarmStart(change_net, Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
+        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
+        network.verified = step
     elif variant == "extrapolation":
         network = _Extrapolation()
         step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
@@ -179,7 +194,9 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
     step.start_from(start)
     rows = []
     for k, image in enumerate(images):
-        step(image)
+        phi = step(image)
+        if verified_phis is not None:
+            verified_phis.append(np.array(phi))
         rows.append({"increment": k + 1, "cg_iterations": step.solve_iterations, "solve_work": step.solve_work,
                      "t_check_s": step.t_check, "t_correction_s": step.t_correction, "t_network_s": step.t_network,
                      "t_step_s": step.t_check + step.t_correction + step.t_network, "residual_before": step.residual_before,
@@ -198,20 +215,44 @@ def exact_solutions(spec: dict, h_px: float, images: list) -> list:
     return [solve_pixel_equation(np.minimum(image, cap), Gc, lc, h_px, spec["pixel_padding"], rtol=1e-12, cuts=cuts) for image in images]
 
 
+def _train_change_net(spec: dict, h_px: float, start: np.ndarray, images: list, phis: list, cuts):
+    """The change network, trained on the first half of this loop's states (H_k, the verified phi
+    before it), taken from the "no network" replay (``phis``: its verified phi per step)."""
+    from ifenn.network.change_net import train_change_net
+
+    if len(phis) != len(images):
+        raise ValueError("the change network trains on the 'no network' replay's states: list that variant before it")
+    cap = spec["history_cap"] if spec["verification"].get("cap_history", True) else np.inf
+    before = [start, *phis[:-1]]
+    half = max(1, len(images) // 2)
+    states = [(np.minimum(images[k], cap), before[k]) for k in range(half)]
+    Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
+    model, log = train_change_net(states, h_px, Gc, lc, spec["pixel_padding"], cuts, **CHANGE_NET_TRAINING)
+    return model, {"run": spec["name"], "wall_s": log["wall_s"], "loss": log["loss"]}
+
+
 def network_worth(specs: list[dict], inputs: dict, model_path: str | Path, increments: int, variants=VARIANTS) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(summary per run and variant, rows per increment) of :func:`replay` on each run's recorded
     loop; ``inputs``: per run name its scene's ``mesh`` and its FEM run's ``fem_dir``."""
+    from ifenn.hybrid.runs import slit_cuts
     from ifenn.pixels import PixelGrid
 
-    tables = []
+    tables, change_net, training = [], None, {}
     for spec in specs:
         with tempfile.TemporaryDirectory() as tmp:
             start, images = record_loop(spec, Path(inputs[spec["name"]]["mesh"]), Path(inputs[spec["name"]]["fem_dir"]),
                                         Path(model_path), increments, Path(tmp))
         h_px = PixelGrid.for_scene(spec["scene"]).h_px
         exact = exact_solutions(spec, h_px, images) if any(v.startswith("oracle") for v in variants) else None
+        phis: list = []
         for variant in variants:
-            tables.append(replay(spec, Path(model_path), h_px, start, images, variant, exact).assign(run=spec["name"], pixels=start.size))
+            if variant == "change network" and change_net is None:   # trained on this (the first) run's loop
+                change_net, training = _train_change_net(spec, h_px, start, images, phis, slit_cuts(spec))
+            table = replay(spec, Path(model_path), h_px, start, images, variant, exact, change_net,
+                           phis if variant == "no network" else None)
+            if variant == "change network":
+                table = table.assign(training_run=training["run"], training_wall_s=training["wall_s"])
+            tables.append(table.assign(run=spec["name"], pixels=start.size))
     rows = pd.concat(tables, ignore_index=True)
     later = rows[rows.increment > 1]   # the first step checks a cold start
     summary = later.groupby(["run", "variant"], sort=False).agg(
