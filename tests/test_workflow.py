@@ -158,6 +158,28 @@ def test_lint_and_slurm_profile_dry_run(tmp_path):
     assert "fem" in dry.stdout
 
 
+def test_stage_times_count_only_the_current_dag(quick_workflow):
+    """stage-times sums the benchmark files of the jobs `all` has today: a file an older workflow
+    left (a run since dropped) is named and left out, every job of the DAG is counted."""
+    from ifenn.studies.stage_times import dag_benchmarks, stage_times
+
+    stale = quick_workflow / "benchmarks" / "fem" / "a-run-since-dropped.tsv"
+    stale.write_text("s\tcpu_time\n9999.0\t9999.0\n")
+    try:
+        keep = dag_benchmarks(quick_workflow, REPO / "Snakefile", [str(REPO / "config" / "quick.yaml")])
+        written = {str(p.relative_to(quick_workflow)) for p in (quick_workflow / "benchmarks").rglob("*.tsv")}
+        assert "benchmarks/fem/snt1-II.tsv" in keep and str(stale.relative_to(quick_workflow)) not in keep
+        assert written - keep == {str(stale.relative_to(quick_workflow))}
+        counted, every = stage_times(quick_workflow, keep).set_index("stage"), stage_times(quick_workflow).set_index("stage")
+        assert every.loc["fem", "wall_s"] - counted.loc["fem", "wall_s"] == pytest.approx(9999.0, abs=0.1)
+        assert counted.loc["total", "jobs"] == len(keep & written)
+        shown = subprocess.run([sys.executable, "-m", "ifenn", "stage-times", str(quick_workflow), "--configfile",
+                                str(REPO / "config" / "quick.yaml")], env=ENV, capture_output=True, text=True, timeout=600)
+        assert shown.returncode == 0 and "left out: 1 benchmark files" in shown.stdout and "a-run-since-dropped" in shown.stdout
+    finally:
+        stale.unlink()
+
+
 def test_report_bundles_every_figure(quick_workflow):
     result = _snakemake("--directory", str(quick_workflow), "--configfile", str(REPO / "config" / "quick.yaml"),
                         "--report", "report.html", cwd=quick_workflow)

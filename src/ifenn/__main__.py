@@ -15,6 +15,7 @@ import argparse
 import json
 import logging
 import sys
+from pathlib import Path
 
 from ifenn.device import DEVICES
 
@@ -49,11 +50,23 @@ def main(argv=None) -> int:
     times = sub.add_parser("stage-times", help="sum the workflow's benchmark files (benchmarks/<stage>/*.tsv) by stage")
     times.add_argument("workdir", nargs="?", default=".", help="the workflow's working directory (default: here)")
     times.add_argument("--cores", type=int, default=2, help="cores of the wall-time bound printed below the table (default 2)")
+    times.add_argument("--snakefile", default=str(Path(__file__).resolve().parents[2] / "Snakefile"),
+                       help="count only the benchmark files of this workflow's current DAG (default: the repository's)")
+    times.add_argument("--configfile", nargs="+", default=None, help="the config files the workflow ran with (default: the Snakefile's)")
+    times.add_argument("--every-file", action="store_true", help="count every benchmark file, stale ones included")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import stage_times, wall_bound
+        from ifenn.studies.stage_times import dag_benchmarks, stage_times, wall_bound
 
-        table = stage_times(args.workdir)
+        keep = None
+        if not args.every_file:
+            keep = dag_benchmarks(args.workdir, args.snakefile, args.configfile)
+            stale = sorted(str(p.relative_to(args.workdir)) for p in Path(args.workdir, "benchmarks").rglob("*.tsv")
+                           if str(p.relative_to(args.workdir)) not in keep)
+            if stale:
+                print(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({', '.join(stale[:8])}"
+                      f"{', ...' if len(stale) > 8 else ''})\n")
+        table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
         print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores) / 60:.1f} min (summed wall / cores, or the longest job)")
         return 0

@@ -141,6 +141,12 @@ def all_cores(wildcards):
         return 1
 
 
+def benchmark_cores(wildcards):
+    """A speed benchmark's threads: every core (nothing beside it) with config benchmarks_alone,
+    else one (its methods are interleaved in one process, so their ratios hold under load)."""
+    return all_cores(wildcards) if config.get("benchmarks_alone", False) else 1
+
+
 def error_sources_cases(wildcards):
     """Per run: its spec, mesh, FEM run folder, published IFENN history and the network."""
     cases = []

@@ -89,8 +89,8 @@ rule phase_field_benchmark:
         increments=config.get("phase_field_benchmark", {}).get("increments", 40),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
         verification=lambda w: json.dumps(json.dumps(config["ifenn"]["verification"])),
-    # all cores: nothing else runs while it measures
-    threads: all_cores
+    # config benchmarks_alone: all cores, nothing else runs while it measures (it uses one)
+    threads: benchmark_cores
     conda:
         "../envs/ifenn.yaml"
     log:
@@ -116,8 +116,8 @@ rule network_worth_benchmark:
         python=PYTHON,
         script=os.path.join(workflow.basedir, "benchmarks", "network_worth.py"),
         increments=config.get("network_worth", {}).get("increments", 40),
-    # all cores: nothing else runs while it measures
-    threads: all_cores
+    # config benchmarks_alone: all cores, nothing else runs while it measures (it uses one)
+    threads: benchmark_cores
     conda:
         "../envs/ifenn.yaml"
     log:
@@ -148,8 +148,8 @@ rule increment_benchmark:
         new_solver=config.get("increment_benchmark", {}).get("new_solver", ""),
         methods=" ".join(config.get("increment_benchmark", {}).get("methods", [])),
         zone=lambda w: json.dumps(json.dumps(config["ifenn"]["process_zone"])),
-    # all cores: nothing else runs while it measures (the benchmark itself uses one)
-    threads: all_cores
+    # config benchmarks_alone: all cores, nothing else runs while it measures (it uses one)
+    threads: benchmark_cores
     conda:
         "../envs/ifenn.yaml"
     log:

@@ -41,8 +41,8 @@ rule whole_run_benchmark:
         script=os.path.join(workflow.basedir, "benchmarks", "whole_run_speed.py"),
         increments=lambda w: (f"--increments {config['whole_run_benchmark']['increments']}"
                               if config["whole_run_benchmark"].get("increments") else ""),
-    # all cores: nothing else runs while it measures (the benchmark itself uses one)
-    threads: all_cores
+    # config benchmarks_alone: all cores, nothing else runs while it measures (it uses one)
+    threads: benchmark_cores
     resources:
         runtime=480,
     conda:

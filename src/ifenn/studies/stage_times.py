@@ -4,22 +4,47 @@ Every rule writes ``benchmarks/<stage>/<job>.tsv`` (Snakemake's format: a header
 ``s`` = the job's wall seconds, the process tree's memory, ``cpu_time`` and more). The stage is
 the folder under ``benchmarks/`` (fem, ifenn, figures, tables, stability, ...), so the table says
 where the CPU time of `snakemake all` goes and what the two cores can at best bring it down to.
+
+A working directory keeps the benchmark files of jobs an older workflow had (a run since
+dropped from the config, a reference now computed another way): ``dag_benchmarks`` asks Snakemake
+(a dry run of the target with every job forced) which benchmark files the current DAG writes, and
+``stage_times(..., keep=...)`` counts only those, so the sum is what `snakemake all` spends today.
 """
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
 
 
-def stage_times(workdir: str | Path) -> pd.DataFrame:
+def dag_benchmarks(workdir: str | Path, snakefile: str | Path, configfiles: list[str] | None = None,
+                   target: str = "all") -> set[str]:
+    """The benchmark files (relative to ``workdir``) that the jobs of ``target`` write, from
+    Snakemake's dry run with every job forced (nothing is run or touched); ``configfiles`` as the
+    workflow was run with (none: the Snakefile's own config)."""
+    # the target before --configfile, which takes every word after it
+    command = [sys.executable, "-m", "snakemake", target, "-s", str(snakefile), "--directory", str(workdir), "-n",
+               "--forceall", "--cores", "1", *(["--configfile", *map(str, configfiles)] if configfiles else [])]
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"snakemake's dry run of {target} failed:\n{(done.stdout + done.stderr)[-2000:]}")
+    return set(re.findall(r"^\s*benchmark: (\S+)$", done.stdout + done.stderr, flags=re.M))
+
+
+def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
     """One row per stage: ``stage, jobs, wall_s`` (sum of the jobs' wall seconds),
     ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it),
-    largest first, and a last row ``total``."""
+    largest first, and a last row ``total``. ``keep``: count only these benchmark files (paths
+    relative to ``workdir``, as ``dag_benchmarks`` gives them); None counts every file."""
     root = Path(workdir) / "benchmarks"
     rows = []
     for path in sorted(root.rglob("*.tsv")):
+        if keep is not None and str(path.relative_to(workdir)) not in keep:
+            continue
         table = pd.read_csv(path, sep="\t")
         if table.empty:
             continue
