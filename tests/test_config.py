@@ -114,6 +114,9 @@ def test_adaptive_finer_references_replace_the_speed_accuracy_points(paper_confi
         (lambda c: c["ifenn_runs"]["snt1-I"].update(switch_over="increment", switch_increment=0), ["switch_increment", "minimum of 1"]),
         (lambda c: c["whole_path"]["runs"].append("snt1-I"), ["whole_path.runs[8]", "'snt1-I'", "needs switch_over 'start'"]),
         (lambda c: c["whole_run_benchmark"]["runs"].append("snt9-whole"), ["whole_run_benchmark.runs[3]", "'snt9-whole'", "allowed"]),
+        (lambda c: c["whole_run_benchmark"]["runs"].append("snt1-I-whole"), ["whole_run_benchmark.runs[3]", "training run 'snt1-I'"]),
+        (lambda c: c["whole_run_benchmark"]["runs"].append("snt1-II-whole"), ["whole_run_benchmark.runs[3]", "share the FEM run"]),
+        (lambda c: c["fem_runs"]["snt2-II"].update(mpi_ranks=2), ["whole_run_benchmark.runs[1]", "mpi_ranks 1"]),
         (lambda c: c["whole_path"].update(network_runs=["snt1-I-verified"]), ["whole_path.network_runs[0]", "not in whole_path.runs"]),
     ],
 )

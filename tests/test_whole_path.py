@@ -69,6 +69,34 @@ def test_whole_path_verified_ifenn_reaches_fem_peak(fem_run, quick_config, tmp_p
     assert record["criterion"] == "start" and record["fem_increments"] == 0 and record["first_ifenn_increment"] == 1
 
 
+def test_paired_whole_run_equals_the_runs_alone(fem_run, quick_config, tmp_path):
+    """The whole-run benchmark's pair (FEM and whole-path IFENN in one process, increments
+    interleaved) writes the same two runs as run alone: every history value but the times equal
+    (the same solves in another order), both run directories complete, and its table's forces are
+    the runs' own; each run's wall time counts only its own increments."""
+    from ifenn.studies.whole_run_benchmark import paired_whole_run
+
+    spec, tmp, fem = fem_run
+    whole_spec = ifenn_run_spec(quick_config, "snt1-II-whole")
+    model = _random_model(whole_spec, tmp_path / "random.pt")
+    alone = pd.DataFrame(run_ifenn(whole_spec, tmp / "mesh.xdmf", None, model, tmp_path / "alone", progress=False, device="cpu"))
+    summary, increments = paired_whole_run(spec, whole_spec, tmp / "mesh.xdmf", model, tmp_path / "fem", tmp_path / "whole",
+                                           device="cpu", devices=[], progress=False)
+    for reference, folder in ((fem, "fem"), (alone, "whole")):
+        paired = pd.read_csv(tmp_path / folder / "history.csv")
+        physics = [c for c in paired.columns if not c.startswith("t_")]
+        pd.testing.assert_frame_equal(paired[physics], reference[physics], check_exact=False, rtol=1e-9, atol=1e-12)
+        assert {p.name for p in (tmp_path / folder).iterdir()} >= {"history.csv", "fields.h5", "paraview.xdmf", "paraview.h5",
+                                                                   "provenance.json"}
+        assert not (tmp_path / folder / ".work").exists()
+        wall = json.loads((tmp_path / folder / "provenance.json").read_text())["wall_time_s"]
+        assert paired.t_increment_s.sum() <= wall < summary.t_increment_total_s.sum()
+    rows = summary.set_index("method")
+    assert list(rows.increments) == [len(fem)] * 2 and rows.loc["fem", "final_force"] == pytest.approx(fem.reaction_force.iloc[-1])
+    assert rows.loc["ifenn", "peak_force"] == pytest.approx(alone.reaction_force.abs().max())
+    assert len(increments) == 2 * len(fem) and rows.loc["ifenn", "phase_field_speedup_vs_fem"] > 0
+
+
 def _exact_spec(fem_spec, quick_config, name, **options):
     spec = copy.deepcopy(fem_spec)
     spec.update({k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, name=name, fem_run="snt1-II", predictor="exact_pixel",

@@ -3,6 +3,10 @@
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] [--device D] --out DIR
   python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] [--device D] --out DIR   (a mesh that follows the crack; one process)
+  python -m ifenn pair  --fem-spec SPEC.json --ifenn-spec SPEC.json --mesh MESH.xdmf --model MODEL.pt [--device D]
+                        --fem-out DIR --ifenn-out DIR --table CSV --increments-table CSV
+                        (a FEM run and its whole-path IFENN run interleaved in one process: both run directories
+                        and the whole-run benchmark's rows)
   python -m ifenn cell  --spec SPEC.json --out DIR [--fem-dir FEM_CELL_DIR --model MODEL.pt] [--device D]   (stability sweep)
 
 --device (auto, cpu, cuda; default auto: CUDA when torch sees one): where the network runs.
@@ -45,7 +49,18 @@ def main(argv=None) -> int:
     cell.add_argument("--out", required=True)
     cell.add_argument("--fem-dir", default=None)
     cell.add_argument("--model", default=None)
-    for command in (hybrid, adaptive, cell):
+    pair = sub.add_parser("pair", help="a FEM run and its whole-path IFENN run interleaved in one process (whole-run benchmark)")
+    pair.add_argument("--fem-spec", required=True)
+    pair.add_argument("--ifenn-spec", required=True, help="a whole-path run (switch_over 'start') of the FEM run's scene")
+    pair.add_argument("--mesh", required=True)
+    pair.add_argument("--model", required=True)
+    pair.add_argument("--fem-out", required=True)
+    pair.add_argument("--ifenn-out", required=True)
+    pair.add_argument("--table", required=True, help="the benchmark's summary rows (CSV)")
+    pair.add_argument("--increments-table", required=True, help="the benchmark's per-increment rows (CSV)")
+    pair.add_argument("--increments", type=int, default=None, help="the tables count the first N increments (default: all)")
+    pair.add_argument("--no-progress", action="store_true")
+    for command in (hybrid, adaptive, cell, pair):
         command.add_argument("--device", default="auto", choices=DEVICES, help="where the network runs (config 'device'; default auto)")
     times = sub.add_parser("stage-times", help="sum the workflow's benchmark files (benchmarks/<stage>/*.tsv) by stage")
     times.add_argument("workdir", nargs="?", default=".", help="the workflow's working directory (default: here)")
@@ -93,6 +108,18 @@ def main(argv=None) -> int:
         with open(args.spec) as stream:
             spec = json.load(stream)
         run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device)
+    elif args.command == "pair":
+        from ifenn.io import write_csv
+        from ifenn.studies.whole_run_benchmark import paired_whole_run
+
+        specs = []
+        for path in (args.fem_spec, args.ifenn_spec):
+            with open(path) as stream:
+                specs.append(json.load(stream))
+        summary, increments = paired_whole_run(*specs, args.mesh, args.model, args.fem_out, args.ifenn_out, device=args.device,
+                                               increments=args.increments, progress=not args.no_progress)
+        write_csv(args.table, summary)
+        write_csv(args.increments_table, increments)
     elif args.command == "cell":
         from ifenn.studies.stability import run_cell
 

@@ -497,6 +497,13 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
 SWITCH_OVER = ("phi_threshold", "increment", "start")
 
 
+def paired_runs(config: dict) -> dict[str, str]:
+    """FEM run -> whole-path IFENN run, for the runs of 'whole_run_benchmark': the workflow computes
+    each pair in one process, increments interleaved, and the benchmark reads their histories
+    (:func:`ifenn.studies.whole_run_benchmark.paired_whole_run`); {} without the section."""
+    return {config["ifenn_runs"][run]["fem_run"]: run for run in (config.get("whole_run_benchmark") or {}).get("runs", [])}
+
+
 def switch_over(config: dict, run: str) -> tuple[str, int | None]:
     """(criterion, switch increment) of an IFENN run: its entry's ``switch_over`` /
     ``switch_increment``, else the 'ifenn' section's (criteria in SWITCH_OVER)."""
@@ -537,6 +544,23 @@ def _switch_over_problems(config: dict) -> list[str]:
             elif switch_over(config, run)[0] != "start":
                 problems.append(f"config key '{section}.runs[{k}]': '{run}' switches by '{switch_over(config, run)[0]}'; "
                                 "a whole-path run needs switch_over 'start'")
+    # the benchmark's runs are computed in one process with their FEM runs (ifenn.studies.whole_run_benchmark)
+    paired = {}
+    for k, run in enumerate(config.get("whole_run_benchmark", {}).get("runs", [])):
+        fem_run = runs.get(run, {}).get("fem_run")
+        if fem_run not in config["fem_runs"]:
+            continue
+        key = f"config key 'whole_run_benchmark.runs[{k}]'"
+        if fem_run == config["picnn"]["training_run"]:
+            problems.append(f"{key}: '{run}' runs on the network's training run '{fem_run}', which the network needs first, "
+                            "and the benchmark computes a whole-path run with its FEM run: allowed, a run of another FEM run")
+        if config["fem_runs"][fem_run].get("mpi_ranks", 1) > 1:
+            problems.append(f"{key}: the FEM run '{fem_run}' of '{run}' runs on {config['fem_runs'][fem_run]['mpi_ranks']} MPI "
+                            f"ranks; the benchmark runs it beside '{run}' in one process (allowed: mpi_ranks 1)")
+        if fem_run in paired:
+            problems.append(f"{key}: '{run}' and '{paired[fem_run]}' share the FEM run '{fem_run}'; allowed: one whole-path "
+                            "run per FEM run")
+        paired.setdefault(fem_run, run)
     for k, run in enumerate(config.get("whole_path", {}).get("network_runs", [])):
         if run not in config["whole_path"]["runs"]:
             problems.append(f"config key 'whole_path.network_runs[{k}]': '{run}' is not in whole_path.runs; "

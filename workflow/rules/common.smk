@@ -1,11 +1,13 @@
 # Validate the configuration before any job starts; helpers shared by the rules.
 import json
+import re
 import sys
+from types import SimpleNamespace
 
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
-                          schedule_increments, speed_accuracy_setups, switch_over, training_spec, validate_config)
+                          paired_runs, schedule_increments, speed_accuracy_setups, switch_over, training_spec, validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 
@@ -28,6 +30,24 @@ MPI_LAUNCHER = "mpirun -n {ranks} --oversubscribe"
 # The FEM runs `all` asks for by name: every one but the finer references that run on the adaptive
 # mesh instead (finer_references: adaptive); a rule that reads such a run still pulls it in.
 ALL_FEM_RUNS = [run for run in config["fem_runs"] if finer_reference_runs(config).get(run, run) == run]
+
+
+# FEM run -> whole-path IFENN run computed with it in one process by the whole-run benchmark's
+# rule (whole_path.smk); the rules fem and ifenn leave these runs to it (their wildcard patterns).
+PAIRED_RUNS = paired_runs(config)
+
+
+def run_pattern(excluded):
+    """A {run} wildcard's pattern that matches any run name but those of ``excluded`` (the name is
+    followed by '/' in every output of the rules that use it)."""
+    if not excluded:
+        return "[^/]+"
+    return "(?!(?:" + "|".join(re.escape(name) for name in sorted(excluded)) + ")/)[^/]+"
+
+
+def identifier(name):
+    """A run name as a rule-name suffix (letters, digits, _)."""
+    return re.sub(r"\W", "_", name)
 
 
 def fem_spec_json(run):

@@ -20,6 +20,8 @@ rule fem_spec:
 
 
 rule fem:
+    wildcard_constraints:
+        run=run_pattern(PAIRED_RUNS),  # the whole-run benchmark's FEM runs: rule whole_run_pair
     input:
         spec="results/fem/{run}/spec.json",
         mesh=lambda w: f"results/mesh/{config['fem_runs'][w.run]['scene']}.xdmf",

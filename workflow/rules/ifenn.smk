@@ -19,6 +19,8 @@ rule ifenn_spec:
 
 
 rule ifenn:
+    wildcard_constraints:
+        run=run_pattern(PAIRED_RUNS.values()),  # the whole-run benchmark's runs: rule whole_run_pair
     input:
         unpack(ifenn_inputs),
     output:

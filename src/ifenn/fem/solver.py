@@ -188,8 +188,18 @@ class StaggeredRun:
 
     # ------------------------------------------------------------- loop
     def run(self) -> list[dict]:
+        """The whole run (or its rest, from a checkpoint): every increment, then the outputs."""
+        for _ in self.steps():
+            pass
+        return self.rows
+
+    def steps(self):
+        """The run as a generator: yields each increment's row after its snapshot and checkpoint,
+        and writes the outputs after the last. Two runs advanced in turn (``next`` on each) run
+        interleaved in one process (:mod:`ifenn.studies.paired_runs`); the wall time in
+        provenance.json counts only the time spent in this run's own steps."""
         spec = self.spec
-        started = time.perf_counter()
+        own_s, started = 0.0, time.perf_counter()
         first = self._resume() + 1
         loads = self.loads
         save = set(spec["save_fields"])
@@ -230,13 +240,15 @@ class StaggeredRun:
                                 refresh=False)
                 bar.update(1 if loads.increments else round((u - u_previous) * 1e3, 6))
             u_previous, increment = row["u"], increment + 1
+            own_s += time.perf_counter() - started
+            yield row
+            started = time.perf_counter()
         if bar is not None:
             bar.close()
         if self.comm.bcast(self.rank0 and not self._snapshots() and bool(self.rows), root=0):
             # nothing computed (a hybrid run whose switch-over was the last increment): keep the final state
             self._snapshot(self.comm.bcast(self.rows[-1]["increment"] if self.rank0 else None, root=0), u_previous)
-        self._finish(time.perf_counter() - started)
-        return self.rows
+        self._finish(own_s + time.perf_counter() - started)
 
     def solve_increment(self, increment: int, u: float, u_previous: float) -> dict:
         """One load increment at prescribed displacement ``u``: staggered iterations, and with an
@@ -342,14 +354,20 @@ class StaggeredRun:
             tmp_dir.rmdir()
 
 
-def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True) -> list[dict]:
-    """Run a plain-FEM phase-field analysis described by ``spec`` (config.fem_run_spec)."""
+def fem_run(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True) -> StaggeredRun:
+    """The plain-FEM run described by ``spec`` (config.fem_run_spec), set up, not started; the
+    caller holds ``out_dir``'s lock (:func:`ifenn.run_files.exclusive_writer`)."""
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.phase_field import FEMPhaseField
     from ifenn.fem.problem import FractureProblem
 
     comm = MPI.COMM_WORLD
-    with run_files.exclusive_writer(out_dir, comm):
-        domain = read_dolfinx_mesh(mesh_path, comm)
-        problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-        return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress).run()
+    domain = read_dolfinx_mesh(mesh_path, comm)
+    problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
+    return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress)
+
+
+def run_fem(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True) -> list[dict]:
+    """Run a plain-FEM phase-field analysis described by ``spec`` (config.fem_run_spec)."""
+    with run_files.exclusive_writer(out_dir, MPI.COMM_WORLD):
+        return fem_run(spec, mesh_path, out_dir, progress).run()

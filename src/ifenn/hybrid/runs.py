@@ -181,10 +181,13 @@ def run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     from ifenn.run_files import exclusive_writer
 
     with exclusive_writer(out_dir, MPI.COMM_WORLD):
-        return _run_ifenn(spec, mesh_path, fem_dir, model_path, out_dir, progress, device)
+        return ifenn_run(spec, mesh_path, fem_dir, model_path, out_dir, progress, device).run()
 
 
-def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool, device="auto") -> list[dict]:
+def ifenn_run(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bool = True, device="auto"):
+    """The IFENN run of :func:`run_ifenn`, set up at its start (the FEM switch-over state, or the
+    initial state), not started (a :class:`ifenn.fem.solver.StaggeredRun`); the caller holds
+    ``out_dir``'s lock."""
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.problem import FractureProblem
     from ifenn.fem.solver import StaggeredRun
@@ -205,6 +208,5 @@ def _run_ifenn(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: bo
     device = network_device(spec, device)
     step = pixel_phase_field(spec, problem, model_path, comm, device)
     start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
-    run = StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
-                       provenance_extra={"switch_over": record, **device_record(device)})
-    return run.run()
+    return StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
+                        provenance_extra={"switch_over": record, **device_record(device)})

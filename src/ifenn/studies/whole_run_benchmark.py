@@ -85,27 +85,88 @@ def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str 
                     bar.update(1)
             if bar is not None:
                 bar.close()
-            histories = {key: pd.DataFrame(run.rows) for key, run in runs.items()}
-            fem_history = histories["fem", "cpu"]
-            over = fem_history.increment[fem_history.phi_max > spec["switch_phi_max"]]
-            nucleation = int(over.iloc[0]) if len(over) else len(loads) + 1
-            for (method, device), history in histories.items():
-                frame = history.reindex(columns=INCREMENT_COLUMNS)
-                per_increment.append(frame.assign(run=spec["name"], fem_run=spec["fem_run"], method=method, device=device))
-                pre = history.increment < nucleation
-                summary.append({"run": spec["name"], "fem_run": spec["fem_run"], "method": method, "device": device,
-                                "elements": "x".join(map(str, spec["scene"]["elements"])), "increments": len(history),
-                                "fem_switch_increment": nucleation,
-                                "t_phase_field_total_s": history.t_phase_field_s.sum(),
-                                "t_phase_field_mean_s": history.t_phase_field_s.mean(),
-                                "t_phase_field_median_s": history.t_phase_field_s.median(),
-                                "t_phase_field_pre_nucleation_s": history.t_phase_field_s[pre].sum(),
-                                "t_phase_field_propagation_s": history.t_phase_field_s[~pre].sum(),
-                                "t_displacement_total_s": history.t_displacement_s.sum(),
-                                "t_increment_total_s": history.t_increment_s.sum(),
-                                "verify_solve_work_mean": history.verify_solve_work.mean() if "verify_solve_work" in history else np.nan,
-                                "final_force": history.reaction_force.iloc[-1],
-                                "peak_force": history.reaction_force.abs().max()})
+            rows, frames = whole_run_rows(spec, {key: pd.DataFrame(run.rows) for key, run in runs.items()})
+            summary += rows
+            per_increment += frames
+    return whole_run_tables(summary, per_increment)
+
+
+def paired_whole_run(fem_spec: dict, ifenn_spec: dict, mesh_path: str | Path, model_path: str | Path, fem_dir: str | Path,
+                     ifenn_dir: str | Path, device="auto", devices=None, increments: int | None = None,
+                     progress: bool = True) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The FEM run ``fem_spec`` and the whole-path IFENN run ``ifenn_spec`` of the same scene,
+    run in one process with their increments interleaved (rotating order, as
+    :func:`whole_run_speed`), each writing its own run directory as :func:`ifenn.fem.solver.run_fem`
+    and :func:`ifenn.hybrid.runs.run_ifenn` would (same files, locks, checkpoints: a killed job
+    resumes both); their histories give the benchmark's tables, so the workflow computes these runs
+    once. ``device``: where the IFENN run's network runs; the IFENN run is repeated, for the
+    benchmark only, on each other device of ``devices`` (default: the CPU and CUDA where present).
+    ``increments``: the tables count the first N increments (None: all). Any schedule, fixed or
+    adaptive: each run advances one increment per turn until both are done."""
+    import contextlib
+
+    from ifenn.device import default_devices, describe, network_device
+    from ifenn.fem.solver import fem_run
+    from ifenn.hybrid.runs import ifenn_run
+    from ifenn.run_files import exclusive_writer
+
+    if ifenn_spec.get("switch_over") != "start":
+        raise ValueError(f"run {ifenn_spec['name']}: a paired whole-path run needs switch_over 'start'")
+    resolved = network_device(ifenn_spec, device)
+    devices = default_devices() if devices is None else devices
+    with contextlib.ExitStack() as stack, tempfile.TemporaryDirectory() as tmp:
+        stack.enter_context(exclusive_writer(fem_dir))
+        stack.enter_context(exclusive_writer(ifenn_dir))
+        runs = {("fem", "cpu"): fem_run(fem_spec, mesh_path, fem_dir, progress=progress),
+                ("ifenn", describe(resolved) if resolved is not None else "cpu"):
+                    ifenn_run(ifenn_spec, mesh_path, None, model_path, ifenn_dir, progress=progress, device=resolved)}
+        for other in devices:
+            if resolved is not None and other != resolved:
+                spec = {**copy.deepcopy(ifenn_spec), "save_fields": [], "checkpoint_every": 10**9}
+                runs["ifenn", describe(other)] = ifenn_run(spec, mesh_path, None, model_path, Path(tmp) / describe(other).split()[0],
+                                                           progress=False, device=other)
+        steps = {key: run.steps() for key, run in runs.items()}
+        turn = 0
+        while steps:
+            keys = list(steps)
+            for key in keys[turn % len(keys):] + keys[:turn % len(keys)]:
+                if next(steps[key], None) is None:
+                    del steps[key]
+            turn += 1
+        histories = {key: pd.DataFrame(run.rows).iloc[:increments] for key, run in runs.items()}
+    return whole_run_tables(*whole_run_rows(ifenn_spec, histories))
+
+
+def whole_run_rows(spec: dict, histories: dict) -> tuple[list[dict], list[pd.DataFrame]]:
+    """The summary rows and per-increment frames of one whole-path run ``spec`` from the
+    histories of its runs, ``(method, device) -> DataFrame`` (FEM's key ('fem', 'cpu'))."""
+    summary, per_increment = [], []
+    fem_history = histories["fem", "cpu"]
+    over = fem_history.increment[fem_history.phi_max > spec["switch_phi_max"]]
+    nucleation = int(over.iloc[0]) if len(over) else int(fem_history.increment.max()) + 1
+    for (method, device), history in histories.items():
+        frame = history.reindex(columns=INCREMENT_COLUMNS)
+        per_increment.append(frame.assign(run=spec["name"], fem_run=spec["fem_run"], method=method, device=device))
+        pre = history.increment < nucleation
+        summary.append({"run": spec["name"], "fem_run": spec["fem_run"], "method": method, "device": device,
+                        "elements": "x".join(map(str, spec["scene"]["elements"])), "increments": len(history),
+                        "fem_switch_increment": nucleation,
+                        "t_phase_field_total_s": history.t_phase_field_s.sum(),
+                        "t_phase_field_mean_s": history.t_phase_field_s.mean(),
+                        "t_phase_field_median_s": history.t_phase_field_s.median(),
+                        "t_phase_field_pre_nucleation_s": history.t_phase_field_s[pre].sum(),
+                        "t_phase_field_propagation_s": history.t_phase_field_s[~pre].sum(),
+                        "t_displacement_total_s": history.t_displacement_s.sum(),
+                        "t_increment_total_s": history.t_increment_s.sum(),
+                        "verify_solve_work_mean": history.verify_solve_work.mean() if "verify_solve_work" in history else np.nan,
+                        "final_force": history.reaction_force.iloc[-1],
+                        "peak_force": history.reaction_force.abs().max()})
+    return summary, per_increment
+
+
+def whole_run_tables(summary: list[dict], per_increment: list[pd.DataFrame]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(summary, per-increment table) of :func:`whole_run_speed` from the rows of
+    :func:`whole_run_rows`: adds the ratios to FEM of the same run."""
     table = pd.DataFrame(summary)
     fem = table[table.method == "fem"].set_index("run")
     for column, name in (("t_phase_field_total_s", "phase_field_speedup_vs_fem"),
