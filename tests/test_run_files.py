@@ -126,3 +126,16 @@ def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     assert table.loc["fem", "jobs"] == 2 and table.loc["fem", "wall_s"] == 400.0 and table.loc["fem", "longest_job"] == "fem/b"
     assert table.loc["total", "wall_s"] == 450.0 and table.loc["total", "cpu_s"] == 225.0
     assert wall_bound(table.reset_index(), 2) == 300.0 and wall_bound(table.reset_index(), 1) == 450.0
+
+
+def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):
+    """Against the DAG's own list: files no job writes are stale (left out of the sums, by
+    ``keep``), the DAG's files not written yet are missing (a run not finished)."""
+    from ifenn.studies.stage_times import stage_times, unmatched
+
+    for job, seconds in (("fem/a", 100.0), ("fem/old", 900.0)):
+        (tmp_path / "benchmarks" / job).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / "benchmarks" / f"{job}.tsv").write_text(f"s\tcpu_time\n{seconds}\t{seconds}\n")
+    keep = {"benchmarks/fem/a.tsv", "benchmarks/ifenn/b.tsv"}
+    assert unmatched(tmp_path, keep) == (["benchmarks/fem/old.tsv"], ["benchmarks/ifenn/b.tsv"])
+    assert stage_times(tmp_path, keep).set_index("stage").loc["total", "wall_s"] == 100.0

@@ -74,7 +74,9 @@ def test_paired_whole_run_equals_the_runs_alone(fem_run, quick_config, tmp_path)
     interleaved) writes the same two runs as run alone: every history value but the times equal
     (the same solves in another order), both run directories complete, and its table's forces are
     the runs' own; each run's wall time counts only its own increments."""
-    from ifenn.studies.whole_run_benchmark import paired_whole_run
+    import torch
+
+    from ifenn.studies.whole_run_benchmark import paired_whole_run, whole_run_speed
 
     spec, tmp, fem = fem_run
     whole_spec = ifenn_run_spec(quick_config, "snt1-II-whole")
@@ -95,6 +97,14 @@ def test_paired_whole_run_equals_the_runs_alone(fem_run, quick_config, tmp_path)
     assert list(rows.increments) == [len(fem)] * 2 and rows.loc["fem", "final_force"] == pytest.approx(fem.reaction_force.iloc[-1])
     assert rows.loc["ifenn", "peak_force"] == pytest.approx(alone.reaction_force.abs().max())
     assert len(increments) == 2 * len(fem) and rows.loc["ifenn", "phase_field_speedup_vs_fem"] > 0
+    # the standalone benchmark (benchmarks/whole_run_speed.py) interleaves the same runs, on their first increments
+    first = 6
+    _, standalone = whole_run_speed([whole_spec], {whole_spec["name"]: {"mesh": tmp / "mesh.xdmf"}}, model, increments=first,
+                                    progress=False, devices=[torch.device("cpu")])
+    for method, reference in (("fem", fem), ("ifenn", alone)):
+        rows = standalone[standalone.method == method]
+        assert list(rows.increment) == list(range(1, first + 1))
+        np.testing.assert_allclose(rows.reaction_force, reference.reaction_force.iloc[:first], rtol=1e-9, atol=1e-12)
 
 
 def _exact_spec(fem_spec, quick_config, name, **options):

@@ -71,16 +71,20 @@ def main(argv=None) -> int:
     times.add_argument("--every-file", action="store_true", help="count every benchmark file, stale ones included")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import dag_benchmarks, stage_times, wall_bound
+        from ifenn.studies.stage_times import dag_benchmarks, stage_times, unmatched, wall_bound
+
+        def some(paths):
+            return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
 
         keep = None
         if not args.every_file:
             keep = dag_benchmarks(args.workdir, args.snakefile, args.configfile)
-            stale = sorted(str(p.relative_to(args.workdir)) for p in Path(args.workdir, "benchmarks").rglob("*.tsv")
-                           if str(p.relative_to(args.workdir)) not in keep)
+            stale, missing = unmatched(args.workdir, keep)
             if stale:
-                print(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({', '.join(stale[:8])}"
-                      f"{', ...' if len(stale) > 8 else ''})\n")
+                print(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({some(stale)})\n")
+            if missing:
+                print(f"not run yet: {len(missing)} of the DAG's {len(keep)} jobs have no benchmark file ({some(missing)}); "
+                      "the sums below count less than `snakemake all` spends\n")
         table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
         print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores) / 60:.1f} min (summed wall / cores, or the longest job)")

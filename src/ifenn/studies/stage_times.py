@@ -63,6 +63,14 @@ def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFra
     return pd.concat([table, pd.DataFrame([total])], ignore_index=True).round({"wall_s": 1, "cpu_s": 1, "longest_s": 1})
 
 
+def unmatched(workdir: str | Path, keep: set[str]) -> tuple[list[str], list[str]]:
+    """(stale, missing): the benchmark files under ``workdir`` that no job of the DAG ``keep``
+    writes (left out of the sums), and the DAG's files not written yet (a run not finished: the
+    sums count less than `snakemake all` spends); paths relative to ``workdir``, sorted."""
+    present = {str(p.relative_to(workdir)) for p in Path(workdir, "benchmarks").rglob("*.tsv")}
+    return sorted(present - keep), sorted(keep - present)
+
+
 def wall_bound(table: pd.DataFrame, cores: int) -> float:
     """A lower bound of the workflow's wall time on ``cores`` cores, seconds: the jobs' summed wall
     time shared perfectly, or the longest job, whichever is larger (every job here uses one core;

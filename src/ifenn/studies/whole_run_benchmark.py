@@ -53,10 +53,28 @@ def _runs(spec: dict, mesh_path: Path, model_path: Path, work: Path, devices) ->
     return runs
 
 
+def interleave(runs: dict, progress=None) -> None:
+    """Advance each :class:`ifenn.fem.solver.StaggeredRun` of ``runs`` one increment per turn, in
+    rotating order (turn k starts with the k-th run), until all are done: every run sees the same
+    machine load over its increments. ``progress``: a bar updated once per turn."""
+    steps = {key: run.steps() for key, run in runs.items()}
+    turn = 0
+    while steps:
+        keys = list(steps)
+        for key in keys[turn % len(keys):] + keys[:turn % len(keys)]:
+            if next(steps[key], None) is None:
+                del steps[key]
+        turn += 1
+        if progress is not None:
+            progress.update(1)
+
+
 def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str | Path,
                     increments: int | None = None, progress: bool = True, devices=None) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(summary, per-increment table). ``specs``: whole-path IFENN run specs (``switch_over``
-    'start', a fixed schedule); ``increments``: the first increments of each schedule (None: all).
+    """(summary, per-increment table), standalone (``benchmarks/whole_run_speed.py``; the workflow
+    takes its rows from :func:`paired_whole_run`, which writes the runs too). ``specs``: whole-path
+    IFENN run specs (``switch_over`` 'start', a fixed schedule); ``increments``: the first increments
+    of each schedule (None: all).
     Summary, one row per (run, method): increments, total / mean / median phase-field seconds,
     the totals before FEM's phi-threshold increment (pre-nucleation) and from it on
     (propagation), displacement and increment totals, the final force, and FEM's phase-field
@@ -70,19 +88,10 @@ def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str 
         for spec in specs:
             if spec.get("switch_over") != "start" or "load" not in spec:
                 raise ValueError(f"run {spec['name']}: the whole-run benchmark needs switch_over 'start' and a fixed schedule")
-            loads = spec["load"][:increments] if increments else spec["load"]
+            spec = {**spec, "load": spec["load"][:increments] if increments else spec["load"]}
             runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp), devices)
-            bar = None
-            if progress:
-                bar = progress_bar(total=len(loads), desc=f"{spec['name']} (FEM + IFENN)")
-            u_previous = 0.0
-            for k, u in enumerate(loads, start=1):
-                keys = list(runs)
-                for key in keys[k % len(keys):] + keys[:k % len(keys)]:
-                    runs[key].rows.append(runs[key].solve_increment(k, u, u_previous))
-                u_previous = u
-                if bar is not None:
-                    bar.update(1)
+            bar = progress_bar(total=len(spec["load"]), desc=f"{spec['name']} (FEM + IFENN)") if progress else None
+            interleave(runs, bar)
             if bar is not None:
                 bar.close()
             rows, frames = whole_run_rows(spec, {key: pd.DataFrame(run.rows) for key, run in runs.items()})
@@ -125,14 +134,7 @@ def paired_whole_run(fem_spec: dict, ifenn_spec: dict, mesh_path: str | Path, mo
                 spec = {**copy.deepcopy(ifenn_spec), "save_fields": [], "checkpoint_every": 10**9}
                 runs["ifenn", describe(other)] = ifenn_run(spec, mesh_path, None, model_path, Path(tmp) / describe(other).split()[0],
                                                            progress=False, device=other)
-        steps = {key: run.steps() for key, run in runs.items()}
-        turn = 0
-        while steps:
-            keys = list(steps)
-            for key in keys[turn % len(keys):] + keys[:turn % len(keys)]:
-                if next(steps[key], None) is None:
-                    del steps[key]
-            turn += 1
+        interleave(runs)
         histories = {key: pd.DataFrame(run.rows).iloc[:increments] for key, run in runs.items()}
     return whole_run_tables(*whole_run_rows(ifenn_spec, histories))
 
