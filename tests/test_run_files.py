@@ -117,7 +117,7 @@ def test_a_second_writer_refuses_at_once_naming_the_holder(quick_spec, tmp_path)
 def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     """stage-times: per stage the jobs, their summed and longest wall time; the bound on N cores is
     the summed wall over N or the longest job, whichever is larger."""
-    from ifenn.studies.stage_times import stage_times, wall_bound
+    from ifenn.studies.stage_times import job_times, stage_times, wall_bound
 
     for stage, job, seconds in (("fem", "a", 100.0), ("fem", "b", 300.0), ("ifenn", "c", 50.0)):
         (tmp_path / "benchmarks" / stage).mkdir(parents=True, exist_ok=True)
@@ -126,6 +126,8 @@ def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     assert table.loc["fem", "jobs"] == 2 and table.loc["fem", "wall_s"] == 400.0 and table.loc["fem", "longest_job"] == "fem/b"
     assert table.loc["total", "wall_s"] == 450.0 and table.loc["total", "cpu_s"] == 225.0
     assert wall_bound(table.reset_index(), 2) == 300.0 and wall_bound(table.reset_index(), 1) == 450.0
+    jobs = job_times(tmp_path)
+    assert list(jobs.job) == ["fem/b", "fem/a", "ifenn/c"] and list(jobs.wall_s) == [300.0, 100.0, 50.0]
 
 
 def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):

@@ -69,9 +69,10 @@ def main(argv=None) -> int:
                        help="count only the benchmark files of this workflow's current DAG (default: the repository's)")
     times.add_argument("--configfile", nargs="+", default=None, help="the config files the workflow ran with (default: the Snakefile's)")
     times.add_argument("--every-file", action="store_true", help="count every benchmark file, stale ones included")
+    times.add_argument("--top", type=int, default=0, help="also list the N longest jobs")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import dag_benchmarks, stage_times, unmatched, wall_bound
+        from ifenn.studies.stage_times import dag_benchmarks, job_times, stage_times, unmatched, wall_bound
 
         def some(paths):
             return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
@@ -88,6 +89,9 @@ def main(argv=None) -> int:
         table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
         print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores) / 60:.1f} min (summed wall / cores, or the longest job)")
+        if args.top:
+            jobs = job_times(args.workdir, keep).head(args.top)
+            print(f"\nthe {len(jobs)} longest jobs:\n" + jobs[["job", "wall_s", "cpu_s"]].round(1).to_markdown(index=False))
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):

@@ -35,11 +35,9 @@ def dag_benchmarks(workdir: str | Path, snakefile: str | Path, configfiles: list
     return set(re.findall(r"^\s*benchmark: (\S+)$", done.stdout + done.stderr, flags=re.M))
 
 
-def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
-    """One row per stage: ``stage, jobs, wall_s`` (sum of the jobs' wall seconds),
-    ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it),
-    largest first, and a last row ``total``. ``keep``: count only these benchmark files (paths
-    relative to ``workdir``, as ``dag_benchmarks`` gives them); None counts every file."""
+def job_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
+    """One row per benchmark file: ``stage, job, wall_s, cpu_s`` (the file's last line), longest
+    first. ``keep``: only these files (paths relative to ``workdir``); None: every file."""
     root = Path(workdir) / "benchmarks"
     rows = []
     for path in sorted(root.rglob("*.tsv")):
@@ -53,7 +51,15 @@ def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFra
                      "wall_s": float(last["s"]), "cpu_s": float(last.get("cpu_time", float("nan")))})
     if not rows:
         raise FileNotFoundError(f"no benchmark files under {root}: run the workflow there first")
-    jobs = pd.DataFrame(rows)
+    return pd.DataFrame(rows).sort_values("wall_s", ascending=False, kind="stable").reset_index(drop=True)
+
+
+def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
+    """One row per stage: ``stage, jobs, wall_s`` (sum of the jobs' wall seconds),
+    ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it),
+    largest first, and a last row ``total``. ``keep``: count only these benchmark files (paths
+    relative to ``workdir``, as ``dag_benchmarks`` gives them); None counts every file."""
+    jobs = job_times(workdir, keep)
     longest = jobs.loc[jobs.groupby("stage").wall_s.idxmax(), ["stage", "job", "wall_s"]].set_index("stage")
     table = jobs.groupby("stage").agg(jobs=("job", "size"), wall_s=("wall_s", "sum"), cpu_s=("cpu_s", "sum"))
     table["longest_s"], table["longest_job"] = longest.wall_s, longest.job
