@@ -173,9 +173,10 @@ def test_stage_times_count_only_the_current_dag(quick_workflow):
         counted, every = stage_times(quick_workflow, keep).set_index("stage"), stage_times(quick_workflow).set_index("stage")
         assert every.loc["fem", "wall_s"] - counted.loc["fem", "wall_s"] == pytest.approx(9999.0, abs=0.1)
         assert counted.loc["total", "jobs"] == len(keep & written)
-        shown = subprocess.run([sys.executable, "-m", "ifenn", "stage-times", str(quick_workflow), "--configfile",
+        shown = subprocess.run([sys.executable, "-m", "ifenn", "stage-times", str(quick_workflow), "--top", "3", "--configfile",
                                 str(REPO / "config" / "quick.yaml")], env=ENV, capture_output=True, text=True, timeout=600)
         assert shown.returncode == 0 and "left out: 1 benchmark files" in shown.stdout and "a-run-since-dropped" in shown.stdout
+        assert "not run yet" not in shown.stdout and "the 3 longest jobs" in shown.stdout
     finally:
         stale.unlink()
 
