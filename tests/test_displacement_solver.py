@@ -121,3 +121,66 @@ def test_a_kept_preconditioner_needs_a_krylov_solve(quick_config):
     config["solver"]["linear_solver_presets"]["gamg-reuse"]["displacement_reuse"]["refresh_iterations"] = 0
     with pytest.raises(ConfigError, match="refresh_iterations"):
         validate_config(config)
+
+
+@pytest.mark.parametrize("matrix", ["baij", "aij"])
+def test_kept_cholesky_factor_agrees_with_a_direct_solve_across_a_crack_run(quick_spec, presets, tmp_path, matrix):
+    """Preset cholesky-reuse (ifenn.fem.factor): CG on the current matrix with a kept nested-
+    dissection Cholesky factor gives the direct solve's displacements and forces to ~1e-9 while
+    the crack runs through, factors far less often than it solves, and takes the block (SBAIJ)
+    path on a BAIJ matrix, PETSc's AIJ Cholesky on an AIJ one."""
+    spec = quick_spec("snt1-I")
+    kept_preset = copy.deepcopy(presets["cholesky-reuse"])
+    kept_preset["displacement_matrix"] = matrix
+    kept, _ = build_problem(spec["scene"], spec["material"], kept_preset, tmp_path, "kept")
+    direct, _ = build_problem(spec["scene"], spec["material"], presets["direct"], tmp_path, "direct")
+    assert kept.A_u.getType() == ("seqbaij" if matrix == "baij" else "seqaij")
+    step = FEMPhaseField(kept, kept_preset["phase_field"])
+    worst_u = worst_force = 0.0
+    for u in spec["load"]:
+        direct.phase_field_gp.x.array[:] = kept.phase_field_gp.x.array
+        kept.solve_displacement(u)
+        direct.solve_displacement(u)
+        scale = np.abs(direct.displacement.x.array).max()
+        worst_u = max(worst_u, np.abs(kept.displacement.x.array - direct.displacement.x.array).max() / scale)
+        worst_force = max(worst_force, abs(kept.reaction_force() - direct.reaction_force()) / abs(direct.reaction_force()))
+        kept.update_history()
+        step.solve()
+        kept.accept_increment()
+    assert step.phase_field_max() > 0.99, "the crack did not run: the scene tests nothing"
+    assert worst_u < 1e-8 and worst_force < 1e-8
+    context = kept.ksp_u.getPC().getPythonContext()
+    assert (context.order is not None) == (matrix == "baij")
+    # the quick scene's 30 coarse steps move g by more than 5 % most increments: fewer factors
+    # than solves, not many fewer (at paper scale ~60 of 700, environment-notes.md)
+    assert context.factorizations == kept.reuse.refreshes < len(spec["load"])
+    assert kept.reuse.reasons[0] == "first" and set(kept.reuse.reasons[1:]) <= {"stiffness", "iterations"}
+    # a fresh factor of the matrix itself is its exact inverse: CG stops after one iteration
+    kept.reuse._built_with = None   # as before the first solve: refresh
+    kept.solve_displacement(spec["load"][-1])
+    assert kept.displacement_iterations <= 1
+
+
+def test_a_run_with_the_kept_cholesky_factor_exits_cleanly(quick_spec, presets, tmp_path):
+    """PETSc destroys the objects Python left it after the interpreter is gone; a python
+    preconditioner must be detached before (ifenn.fem.factor._detach), or the process crashes at
+    exit with a finished run's outputs written (exit code 59: a failed job to snakemake)."""
+    import json
+    import subprocess
+    import sys
+
+    spec = quick_spec("snt1-I")
+    spec.update(name="exit", load=spec["load"][:3], save_fields=[], linear_solvers="cholesky-reuse", petsc=presets["cholesky-reuse"])
+    (tmp_path / "spec.json").write_text(json.dumps(spec))
+    _, mesh = build_problem(spec["scene"], spec["material"], presets["direct"], tmp_path, "mesh")
+    done = subprocess.run([sys.executable, "-m", "ifenn", "fem", "--spec", str(tmp_path / "spec.json"), "--mesh", str(mesh),
+                           "--out", str(tmp_path / "run")], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "run" / "history.csv").exists()
+
+
+def test_a_python_preconditioner_must_be_importable(quick_config):
+    config = copy.deepcopy(quick_config)
+    config["solver"]["linear_solver_presets"]["cholesky-reuse"]["displacement"]["pc_python_type"] = "ifenn.fem.factor.NoSuchFactor"
+    with pytest.raises(ConfigError, match="pc_python_type"):
+        validate_config(config)

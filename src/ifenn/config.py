@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import functools
 import hashlib
+import importlib
 import json
 import math
 from pathlib import Path
@@ -168,6 +169,13 @@ def _petsc_problems(key: str, options: dict) -> list[str]:
             allowed = names.get(_PETSC_TYPE_OPTIONS[base])
             if allowed is not None and str(value) not in allowed:
                 problems.append(f"config key '{key}.{option}': {value!r} is not a PETSc type of that kind; allowed: {allowed}")
+        elif base == "pc_python_type":   # a python preconditioner: module.Class, importable here
+            module, _, name = str(value).rpartition(".")
+            try:
+                getattr(importlib.import_module(module), name)
+            except (ImportError, AttributeError, ValueError):
+                problems.append(f"config key '{key}.{option}': {value!r} is not an importable module.Class "
+                                "(e.g. ifenn.fem.factor.NestedDissectionCholesky)")
         elif base.endswith(("_rtol", "_atol", "_max_it")):
             integral = base.endswith("_max_it")
             good = isinstance(value, int if integral else (int, float)) and not isinstance(value, bool) and value > 0

@@ -248,7 +248,7 @@ class FractureProblem:
             self.q_dof_of_pixel[index] = self.owned_q_dofs
 
         self._build_boundary_conditions()
-        self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"))
+        self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"), petsc.get("displacement_matrix", "aij"))
         self._tensile_energy = fem.Expression(
             physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"]),
             self.quadrature_points,
@@ -274,12 +274,13 @@ class FractureProblem:
         self._loaded_dofs_with_ghosts = loaded
         self.loaded_dofs = loaded[loaded < n_owned]
 
-    def _build_equilibrium(self, options: dict, reuse: dict | None = None) -> None:
+    def _build_equilibrium(self, options: dict, reuse: dict | None = None, matrix_type: str = "aij") -> None:
         """Forms, matrix and KSP of the displacement solve. ``reuse`` (a preset's
         ``displacement_reuse``, None: rebuild everything every solve, the classic path): keep
         the preconditioner across solves (PreconditionerReuse), assemble only the cells whose
         degradation moved (IncrementalStiffness) and start from the previous solution scaled to
-        the new load."""
+        the new load. ``matrix_type`` (a preset's ``displacement_matrix``): PETSc's storage of
+        the matrix, aij or baij (2x2 blocks: what ifenn.fem.factor factors fast)."""
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
         self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, self.material) * self.dx)
         # the reaction on the loaded dofs comes only from the cells that hold them (owned or
@@ -292,7 +293,7 @@ class FractureProblem:
         edge = dmesh.meshtags(self.domain, self.domain.topology.dim, loaded_cells, np.ones(len(loaded_cells), dtype=np.int32))
         dx_loaded = ufl.Measure("dx", domain=self.domain, metadata=QUADRATURE, subdomain_data=edge)(1)
         self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * dx_loaded)
-        self.A_u = fem_petsc.create_matrix(self.equilibrium_form)
+        self.A_u = fem_petsc.create_matrix(self.equilibrium_form, None if matrix_type == "aij" else matrix_type)
         self.A_u.setNearNullSpace(rigid_body_modes(self.V))
         self.b_u = fem_petsc.create_vector(self.internal_force_form)
         self.internal_force = fem_petsc.create_vector(self.internal_force_form)

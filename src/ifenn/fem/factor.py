@@ -1,0 +1,116 @@
+"""A Cholesky factor that is cheap to keep: the preconditioner of the ``cholesky-reuse`` preset.
+
+The displacement matrix changes a little every increment (g(phi) moves) and a lot only where
+the crack runs. Kept across increments (``displacement_reuse``, fem/problem.py
+PreconditionerReuse), the factor of an earlier matrix is a preconditioner that CG needs a few
+iterations with; that pays only if applying the factor is cheap. MUMPS factors fast and applies
+slowly (snt1, 80k dofs, one core: 0.118 s a factor, 22 ms an apply); PETSc's own Cholesky of
+the AIJ matrix applies fast and factors slowly (0.33 s, 6.2 ms). PETSc's block (SBAIJ, 2x2
+blocks) Cholesky has both (0.16 s, 6.9 ms), but takes no fill-reducing ordering of its own: this
+preconditioner permutes the matrix by nested dissection (computed once: the pattern never
+changes), converts it to SBAIJ and factors that; an apply permutes in and out
+(environment-notes.md, eighteenth session).
+
+Select it as a PETSc python preconditioner::
+
+    displacement: {ksp_type: cg, pc_type: python,
+                   pc_python_type: ifenn.fem.factor.NestedDissectionCholesky, ...}
+
+In parallel (PETSc's own Cholesky is serial) it factors with MUMPS instead: same answer.
+"""
+
+from __future__ import annotations
+
+import atexit
+
+import numpy as np
+from petsc4py import PETSc
+
+#: the preconditioners using this context, detached before PETSc finalizes (PETSc destroys
+#: objects Python left it at PetscFinalize, after the interpreter is gone: a python PC would call
+#: back into it and crash the process at exit)
+_IN_USE: list[PETSc.PC] = []
+
+
+@atexit.register
+def _detach() -> None:
+    for pc in _IN_USE:
+        if pc.handle:
+            pc.setType(PETSc.PC.Type.NONE)
+            pc.destroy()
+    _IN_USE.clear()
+
+
+class NestedDissectionCholesky:
+    """petsc4py python-PC context: y = (P^T L L^T P)^-1 x with P the nested-dissection order.
+
+    The fast path needs the operator as a serial BAIJ matrix (``displacement_matrix: baij`` in
+    the preset): BAIJ permutes and converts to SBAIJ in ~15 ms, AIJ to SBAIJ takes 2.5 s (PETSc
+    converts a blocked AIJ entry by entry). An AIJ operator is factored by PETSc's AIJ Cholesky
+    in nested-dissection order, a parallel one by MUMPS: slower, the same answer.
+    """
+
+    def __init__(self):
+        self.inner: PETSc.KSP | None = None
+        self.blocks: PETSc.IS | None = None      # the nested-dissection order of the 2x2 blocks
+        self.order: np.ndarray | None = None     # row k of the permuted matrix is row order[k]
+        self.factored: PETSc.Mat | None = None   # the permuted SBAIJ matrix the inner KSP factors
+        self.x_permuted = self.y_permuted = None
+        self.factorizations = 0
+
+    def _create(self, A: PETSc.Mat) -> None:
+        self.inner = PETSc.KSP().create(A.getComm())
+        self.inner.setType(PETSc.KSP.Type.PREONLY)
+        pc = self.inner.getPC()
+        pc.setType(PETSc.PC.Type.CHOLESKY)
+        if A.getComm().getSize() > 1:
+            pc.setFactorSolverType("mumps")
+        elif A.getType() == PETSc.Mat.Type.SEQBAIJ and A.getBlockSize() > 1:
+            pc.setFactorSolverType("petsc")
+            pc.setFactorOrdering("natural")   # the matrix comes in nested-dissection order
+            block_order = A.getOrdering("nd")[0].getIndices()
+            self.blocks = PETSc.IS().createBlock(A.getBlockSize(), block_order)
+            self.order = self.blocks.getIndices().astype(np.int64)
+        else:
+            pc.setFactorSolverType("petsc")
+            pc.setFactorOrdering("nd")
+
+    def setUp(self, pc: PETSc.PC) -> None:
+        A = pc.getOperators()[1]
+        if self.inner is None:
+            self._create(A)
+            _IN_USE.append(pc)
+        if self.order is None:
+            self.inner.setOperators(A)
+        else:
+            permuted = A.permute(self.blocks, self.blocks)
+            permuted.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+            permuted.convert(PETSc.Mat.Type.SBAIJ)   # in place: the fast conversion
+            if self.factored is None:
+                self.factored = permuted
+                self.x_permuted, self.y_permuted = permuted.createVecs()
+            else:   # same pattern: the factor's symbolic part is kept
+                permuted.copy(self.factored, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                permuted.destroy()
+            self.inner.setOperators(self.factored)
+        self.inner.setUp()
+        self.factorizations += 1
+
+    def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
+        if self.order is None:
+            self.inner.solve(x, y)
+            return
+        self.x_permuted.array[:] = x.array_r[self.order]
+        self.inner.solve(self.x_permuted, self.y_permuted)
+        y.array[self.order] = self.y_permuted.array_r
+
+    def destroy(self, pc: PETSc.PC) -> None:
+        for obj in (self.inner, self.factored, self.x_permuted, self.y_permuted, self.blocks):
+            if obj is not None:
+                obj.destroy()
+        self.inner = self.factored = self.x_permuted = self.y_permuted = self.blocks = None
+
+    def view(self, pc: PETSc.PC, viewer: PETSc.Viewer) -> None:
+        kind = "MUMPS" if self.inner is not None and self.inner.getComm().getSize() > 1 else (
+            "SBAIJ, nested-dissection blocks" if self.order is not None else "AIJ, nested dissection")
+        viewer.printfASCII(f"  Cholesky ({kind}), {self.factorizations} factorizations\n")
