@@ -10,7 +10,6 @@ from __future__ import annotations
 import copy
 import functools
 import hashlib
-import importlib
 import json
 import math
 from pathlib import Path
@@ -157,6 +156,24 @@ def _petsc_type_names() -> dict | None:
     return json.loads(done.stdout) if done.returncode == 0 else None
 
 
+def _python_class_exists(path: str) -> bool:
+    """Whether ``module.Class`` names a class defined in a module found on the path. Read, not
+    imported: importing it here would initialise PETSc and MPI in the Snakemake process, whose
+    mpirun children then fail without a word (Open MPI's singleton environment)."""
+    import ast
+    import importlib.util
+
+    module, _, name = path.rpartition(".")
+    try:
+        found = importlib.util.find_spec(module) if module else None
+    except (ImportError, ValueError):
+        return False
+    if found is None or not found.origin or not found.origin.endswith(".py"):
+        return False
+    tree = ast.parse(Path(found.origin).read_text())
+    return any(isinstance(node, ast.ClassDef) and node.name == name for node in tree.body)
+
+
 def _petsc_problems(key: str, options: dict) -> list[str]:
     """Values of PETSc options that PETSc would refuse only inside a run: an unknown type name
     (``ksp_type``, ``pc_type``, the factor's solver and ordering, also behind a ``sub_`` or
@@ -169,13 +186,9 @@ def _petsc_problems(key: str, options: dict) -> list[str]:
             allowed = names.get(_PETSC_TYPE_OPTIONS[base])
             if allowed is not None and str(value) not in allowed:
                 problems.append(f"config key '{key}.{option}': {value!r} is not a PETSc type of that kind; allowed: {allowed}")
-        elif base == "pc_python_type":   # a python preconditioner: module.Class, importable here
-            module, _, name = str(value).rpartition(".")
-            try:
-                getattr(importlib.import_module(module), name)
-            except (ImportError, AttributeError, ValueError):
-                problems.append(f"config key '{key}.{option}': {value!r} is not an importable module.Class "
-                                "(e.g. ifenn.fem.factor.NestedDissectionCholesky)")
+        elif base == "pc_python_type" and not _python_class_exists(str(value)):   # a python preconditioner
+            problems.append(f"config key '{key}.{option}': {value!r} is not a module.Class found here "
+                            "(e.g. ifenn.fem.factor.NestedDissectionCholesky)")
         elif base.endswith(("_rtol", "_atol", "_max_it")):
             integral = base.endswith("_max_it")
             good = isinstance(value, int if integral else (int, float)) and not isinstance(value, bool) and value > 0

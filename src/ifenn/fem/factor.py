@@ -26,19 +26,26 @@ import atexit
 import numpy as np
 from petsc4py import PETSc
 
-#: the preconditioners using this context, detached before PETSc finalizes (PETSc destroys
-#: objects Python left it at PetscFinalize, after the interpreter is gone: a python PC would call
-#: back into it and crash the process at exit)
+#: the preconditioners using this context. PETSc destroys at PetscFinalize what Python left it
+#: (petsc4py delays the destruction of collected objects), after the interpreter is gone: a python
+#: PC would call back into it there and crash the process at exit, its outputs written (exit code
+#: 59: a failed job to snakemake). So each is kept here and detached before, at exit; the collected
+#: ones are destroyed while Python still runs (garbage_cleanup).
 _IN_USE: list[PETSc.PC] = []
 
 
 @atexit.register
 def _detach() -> None:
+    import gc
+
+    gc.collect()
+    PETSc.garbage_cleanup()
     for pc in _IN_USE:
         if pc.handle:
             pc.setType(PETSc.PC.Type.NONE)
             pc.destroy()
     _IN_USE.clear()
+    PETSc.garbage_cleanup()
 
 
 class NestedDissectionCholesky:
@@ -57,6 +64,9 @@ class NestedDissectionCholesky:
         self.factored: PETSc.Mat | None = None   # the permuted SBAIJ matrix the inner KSP factors
         self.x_permuted = self.y_permuted = None
         self.factorizations = 0
+
+    def create(self, pc: PETSc.PC) -> None:
+        _IN_USE.append(pc)
 
     def _create(self, A: PETSc.Mat) -> None:
         self.inner = PETSc.KSP().create(A.getComm())
@@ -79,7 +89,6 @@ class NestedDissectionCholesky:
         A = pc.getOperators()[1]
         if self.inner is None:
             self._create(A)
-            _IN_USE.append(pc)
         if self.order is None:
             self.inner.setOperators(A)
         else:

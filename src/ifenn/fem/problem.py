@@ -293,7 +293,9 @@ class FractureProblem:
         edge = dmesh.meshtags(self.domain, self.domain.topology.dim, loaded_cells, np.ones(len(loaded_cells), dtype=np.int32))
         dx_loaded = ufl.Measure("dx", domain=self.domain, metadata=QUADRATURE, subdomain_data=edge)(1)
         self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * dx_loaded)
-        self.A_u = fem_petsc.create_matrix(self.equilibrium_form, None if matrix_type == "aij" else matrix_type)
+        # BAIJ in serial only: in parallel the factor is MUMPS's, whose Cholesky takes no BAIJ
+        serial_baij = matrix_type == "baij" and self.comm.size == 1
+        self.A_u = fem_petsc.create_matrix(self.equilibrium_form, "baij" if serial_baij else None)
         self.A_u.setNearNullSpace(rigid_body_modes(self.V))
         self.b_u = fem_petsc.create_vector(self.internal_force_form)
         self.internal_force = fem_petsc.create_vector(self.internal_force_form)
