@@ -145,11 +145,25 @@ def test_kept_cholesky_factor_agrees_with_a_direct_solve_across_a_crack_run(quic
     direct, _ = build_problem(spec["scene"], spec["material"], presets["direct"], tmp_path, "direct")
     assert kept.A_u.getType() == ("seqbaij" if matrix == "baij" else "seqaij")
     step = FEMPhaseField(kept, kept_preset["phase_field"])
+    kept_solves, solve = [], kept.solve_displacement
+
+    def solve_recording(u):   # the CG iterations of each solve that kept the factor
+        refreshes = kept.reuse.refreshes
+        iterations = solve(u)
+        if kept.reuse.refreshes == refreshes:
+            kept_solves.append(iterations)
+        return iterations
+
+    kept.solve_displacement = solve_recording
     worst_u, forces = _crack_run(kept, direct, step, spec["load"])
+    kept.solve_displacement = solve
     worst_force = (np.abs(forces[:, 0] - forces[:, 1]) / np.abs(forces[:, 1])).max()
     assert step.phase_field_max() > 0.99, "the crack did not run: the scene tests nothing"
     assert worst_u < 1e-8 and worst_force < 1e-8
     context = kept.ksp_u.getPC().getPythonContext()
+    # the factor really is kept: a solve on a matrix that moved since the factor needs more CG
+    # iterations than one (a factor silently redone at every apply, of the matrix itself, gives 1)
+    assert kept_solves and max(kept_solves) > 1
     assert (context.order is not None) == (matrix == "baij")
     # the quick scene's 30 coarse steps move g by more than 5 % most increments: fewer factors
     # than solves, not many fewer (at paper scale ~60 of 700, environment-notes.md)

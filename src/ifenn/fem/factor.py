@@ -89,7 +89,7 @@ class NestedDissectionCholesky:
         A = pc.getOperators()[1]
         if self.inner is None:
             self._create(A)
-        if self.order is None:
+        if self.order is None:   # A itself: its values change every solve, the factor must not
             self.inner.setOperators(A)
         else:
             permuted = A.permute(self.blocks, self.blocks)
@@ -102,7 +102,13 @@ class NestedDissectionCholesky:
                 permuted.copy(self.factored, PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
                 permuted.destroy()
             self.inner.setOperators(self.factored)
+        inner_pc = self.inner.getPC()
+        inner_pc.setReusePreconditioner(False)
         self.inner.setUp()
+        # kept until the next setUp: on the AIJ and MUMPS paths the inner operator is the outer
+        # matrix, whose new values would otherwise refactor it at every apply (a fresh factor each
+        # CG iteration: exact, and as slow as a direct solve each iteration)
+        inner_pc.setReusePreconditioner(True)
         self.factorizations += 1
 
     def apply(self, pc: PETSc.PC, x: PETSc.Vec, y: PETSc.Vec) -> None:
