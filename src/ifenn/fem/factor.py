@@ -89,7 +89,7 @@ class NestedDissectionCholesky:
         A = pc.getOperators()[1]
         if self.inner is None:
             self._create(A)
-        if self.order is None:   # A itself: its values change every solve, the factor must not
+        if self.order is None:
             self.inner.setOperators(A)
         else:
             permuted = A.permute(self.blocks, self.blocks)
