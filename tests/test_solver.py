@@ -129,6 +129,59 @@ def test_killed_run_resumes_to_the_same_history(quick_spec, quick_config, tmp_pa
         assert h5.attrs["switch_increment"] == switch
 
 
+def test_a_run_that_repeats_another_runs_first_increments_starts_from_its_state(quick_config, tmp_path):
+    # quick schedule III repeats schedule I's first 20 increments: snt1-III starts from snt1-I's
+    # saved state at 20 and must end as the run computed from its first increment (a direct
+    # solver: to round-off), with the same rows and the same saved fields
+    from ifenn.config import deep_merge, fem_run_spec, fem_run_spec_shared, shared_prefix
+    from ifenn.run_files import read_provenance, read_states, saved_increments
+
+    config = deep_merge(quick_config, {"solver": {"linear_solvers": "direct"}})
+    start = shared_prefix(config, "snt1-III")
+    assert start is not None and start["run"] == "snt1-I" and start["increment"] == 20
+    assert shared_prefix(deep_merge(config, {"solver": {"share_load_prefix": False}}), "snt1-III") is None
+    source, shared = fem_run_spec(config, "snt1-I"), fem_run_spec_shared(config, "snt1-III")
+    mesh = _mesh(source, tmp_path)
+    run_fem(source, mesh, tmp_path / "snt1-I", progress=False)
+    scratch = fem_run_spec(config, "snt1-III")
+    reference = pd.DataFrame(run_fem(scratch, mesh, tmp_path / "scratch", progress=False))
+    args = _prepare(shared, tmp_path, "shared")
+    missing = subprocess.run([sys.executable, *args], env=ENV, capture_output=True, text=True)
+    assert missing.returncode != 0 and "--start-dir" in missing.stderr
+    subprocess.run([sys.executable, *args, "--start-dir", str(tmp_path / "snt1-I")], check=True, env=ENV)
+    history = _history(tmp_path, "shared")
+    assert list(history.increment) == list(range(1, len(scratch["load"]) + 1))
+    np.testing.assert_array_equal(history.reaction_force[:20], _history(tmp_path, "snt1-I").reaction_force[:20])
+    scale = reference.reaction_force.abs().max()
+    assert reference.phi_max.iloc[-1] > 0.99   # the crack ran after the shared increments
+    np.testing.assert_allclose(history.reaction_force, reference.reaction_force, rtol=1e-9, atol=1e-9 * scale)
+    np.testing.assert_allclose(history.phi_max, reference.phi_max, rtol=1e-9, atol=1e-12)
+    fields, expected = tmp_path / "shared" / "fields.h5", tmp_path / "scratch" / "fields.h5"
+    assert saved_increments(fields) == saved_increments(expected)
+    for ours, theirs in zip(read_states(fields), read_states(expected), strict=True):
+        for key in ("phase_field", "displacement", "history"):
+            np.testing.assert_allclose(ours[key], theirs[key], rtol=1e-8, atol=1e-10 * np.abs(theirs[key]).max())
+    assert read_provenance(tmp_path / "shared")["start_from"] == start
+    # a start whose run changed since: refused, naming the run to rerun
+    stale = {**shared, "start_from": {**start, "spec_hash": "0000"}}
+    with pytest.raises(ValueError, match="rerun snt1-I"):
+        run_fem(stale, mesh, tmp_path / "stale", progress=False, start_dir=tmp_path / "snt1-I")
+
+
+def test_paper_runs_share_only_identical_prefixes(paper_config):
+    from ifenn.config import fem_run_spec, paired_runs, shared_prefix
+
+    starts = {run: start for run in paper_config["fem_runs"] if (start := shared_prefix(paper_config, run))}
+    assert {run: (s["run"], s["increment"]) for run, s in starts.items()} == {
+        "snt1-III": ("snt1-II", 500), "snt1-III-conv": ("snt1-II-conv", 500), "snt1-III-fine": ("snt1-II-fine", 500)}
+    for run, start in starts.items():
+        mine, theirs = fem_run_spec(paper_config, run), fem_run_spec(paper_config, start["run"])
+        assert mine["load"][: start["increment"]] == theirs["load"][: start["increment"]]
+        assert mine["load"][start["increment"]] != theirs["load"][start["increment"]]
+        assert start["run"] not in starts   # no chains, no cycles
+    assert not set(starts) & set(paired_runs(paper_config))
+
+
 def test_checkpoint_of_another_configuration_is_ignored(quick_spec, tmp_path):
     spec = quick_spec("snt1-I", load=[5e-4 * k for k in range(1, 7)], checkpoint_every=2)
     mesh = _mesh(spec, tmp_path)

@@ -31,6 +31,8 @@ def main(argv=None) -> int:
     fem.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.fem_run_spec)")
     fem.add_argument("--mesh", required=True, help="mesh XDMF written by the mesh rule")
     fem.add_argument("--out", required=True, help="output directory")
+    fem.add_argument("--start-dir", default=None,
+                     help="output directory of the FEM run whose saved state this one starts from (a spec with start_from)")
     fem.add_argument("--no-progress", action="store_true")
     hybrid = sub.add_parser("ifenn", help="continue a FEM run from its switch-over increment with IFENN")
     hybrid.add_argument("--spec", required=True, help="resolved IFENN run spec (JSON, from config.ifenn_run_spec)")
@@ -101,7 +103,9 @@ def main(argv=None) -> int:
 
         with open(args.spec) as stream:
             spec = json.load(stream)
-        run_fem(spec, args.mesh, args.out, progress=not args.no_progress)
+        if spec.get("start_from") is not None and args.start_dir is None:
+            parser.error(f"run {spec['name']} starts from run {spec['start_from']['run']}'s saved state: --start-dir is needed")
+        run_fem(spec, args.mesh, args.out, progress=not args.no_progress, start_dir=args.start_dir)
     elif args.command == "ifenn":
         from ifenn.hybrid.runs import run_ifenn
 

@@ -656,6 +656,60 @@ def fem_run_spec(config: dict, run: str) -> dict:
     }
 
 
+#: what may differ between two FEM runs whose first increments are the same computation
+PREFIX_FREE_KEYS = ("name", "schedule_name", "load", "save_fields")
+
+
+def shared_prefix(config: dict, run: str) -> dict | None:
+    """The saved state of another FEM run that ``run`` can start from (config
+    ``solver.share_load_prefix``): {'run', 'increment' k, 'spec_hash' of that run}, or None.
+
+    Two FEM runs compute the same first k increments when their specs agree but for the loads
+    and the saved increments (PREFIX_FREE_KEYS) and their prescribed displacements agree exactly
+    on increments 1..k (schedule III repeats schedule II's first 500 increments). The other run
+    must have saved increment k and every increment ``run`` saves up to k (its switch-over
+    state too: the same rows, the same switch), and, so that no two runs wait on each other,
+    have fewer increments (ties: the name first in order). The longest k wins. Only FEM runs
+    with fixed schedules share; a whole-run benchmark's FEM run never starts from another
+    (it times the whole run)."""
+    if not config["solver"].get("share_load_prefix", False) or run in paired_runs(config):
+        return None
+    spec = fem_run_spec(config, run)
+    if "load" not in spec:
+        return None
+    rest = {k: v for k, v in spec.items() if k not in PREFIX_FREE_KEYS}
+    best = None
+    for other in sorted(config["fem_runs"]):
+        if other == run:
+            continue
+        candidate = fem_run_spec(config, other)
+        if "load" not in candidate or (len(candidate["load"]), other) >= (len(spec["load"]), run):
+            continue
+        if {k: v for k, v in candidate.items() if k not in PREFIX_FREE_KEYS} != rest:
+            continue
+        common = 0
+        for mine, theirs in zip(spec["load"], candidate["load"], strict=False):
+            if mine != theirs:
+                break
+            common += 1
+        saved = set(candidate["save_fields"])
+        own = sorted(spec["save_fields"])
+        ends = [k for k in sorted(saved) if k <= min(common, len(spec["load"]) - 1) and all(i in saved for i in own if i <= k)]
+        if ends and (best is None or ends[-1] > best["increment"]):
+            best = {"run": other, "increment": ends[-1], "spec_hash": spec_hash(candidate)}
+    return best
+
+
+def fem_run_spec_shared(config: dict, run: str) -> dict:
+    """:func:`fem_run_spec` plus ``start_from`` (:func:`shared_prefix`) where the run starts
+    from another run's saved state: the spec the workflow's FEM rule runs."""
+    spec = fem_run_spec(config, run)
+    start = shared_prefix(config, run)
+    if start is not None:
+        spec["start_from"] = start
+    return spec
+
+
 IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
 
 

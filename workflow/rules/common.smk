@@ -6,8 +6,9 @@ from types import SimpleNamespace
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
-                          paired_runs, schedule_increments, speed_accuracy_setups, switch_over, training_spec, validate_config)
+from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec_shared, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
+                          paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
+                          validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
 
@@ -50,8 +51,31 @@ def identifier(name):
     return re.sub(r"\W", "_", name)
 
 
+_SHARED_PREFIX = {}
+
+
+def fem_start(run):
+    """The other FEM run's saved state this one starts from (ifenn.config.shared_prefix), or None."""
+    if run not in _SHARED_PREFIX:
+        _SHARED_PREFIX[run] = shared_prefix(config, run)
+    return _SHARED_PREFIX[run]
+
+
+def fem_start_inputs(wildcards):
+    """The outputs of the run a FEM run starts from (none when it starts from its first increment)."""
+    start = fem_start(wildcards.run)
+    if start is None:
+        return {}
+    return {"start_fields": f"results/fem/{start['run']}/fields.h5", "start_history": f"results/fem/{start['run']}/history.csv"}
+
+
+def fem_start_argument(wildcards):
+    start = fem_start(wildcards.run)
+    return "" if start is None else f"--start-dir results/fem/{start['run']}"
+
+
 def fem_spec_json(run):
-    return json.dumps(fem_run_spec(config, run), sort_keys=True)
+    return json.dumps(fem_run_spec_shared(config, run), sort_keys=True)
 
 
 def _fem_cost(run):

@@ -23,6 +23,7 @@ rule fem:
     wildcard_constraints:
         run=run_pattern(PAIRED_RUNS),  # the whole-run benchmark's FEM runs: rule whole_run_pair
     input:
+        unpack(fem_start_inputs),  # a run whose first increments another run computed (common.smk fem_start)
         spec="results/fem/{run}/spec.json",
         mesh=lambda w: f"results/mesh/{config['fem_runs'][w.run]['scene']}.xdmf",
     output:
@@ -35,6 +36,7 @@ rule fem:
         launcher=fem_launcher,
         python=PYTHON,
         out=lambda w, output: os.path.dirname(output.history),
+        start=fem_start_argument,
     threads: 1
     # the FEM runs are the long jobs and everything else waits on them: the training run first,
     # then longest first, before the short jobs whenever a core is free (common.smk fem_priority)
@@ -54,7 +56,7 @@ rule fem:
         "benchmarks/fem/{run}.tsv"
     shell:
         "OMP_NUM_THREADS=1 {params.launcher} {params.python} -m ifenn fem --spec {input.spec} --mesh {input.mesh}"
-        " --out {params.out} > {log} 2>&1"
+        " --out {params.out} {params.start} > {log} 2>&1"
 
 
 rule fem_force_figure:
