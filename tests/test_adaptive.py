@@ -187,6 +187,39 @@ def test_killed_adaptive_run_resumes_to_the_same_history(adaptive_and_fine, tmp_
     np.testing.assert_array_equal(resumed.dofs, adaptive.dofs[:14])
 
 
+def test_adaptive_run_that_repeats_another_runs_first_increments_starts_from_its_state(adaptive_and_fine, tmp_path):
+    """A run whose first 8 loads are those of the fixture's run, then finer steps, started from
+    that run's saved increment 8 (images and fine regions; the mesh rebuilt from them) ends as
+    the run computed from its first increment, with the same rows, meshes and saved fields."""
+    from ifenn.adaptive.run import run_adaptive
+    from ifenn.config import spec_hash
+
+    source, source_dir, _, _ = adaptive_and_fine
+    load = source["load"][:8] + [source["load"][7] + 2e-4 * k for k in range(1, 33)]
+    scratch = {**source, "name": "finer-steps", "load": load, "save_fields": [4, 8, 20, 40]}
+    shared = {**scratch, "start_from": {"run": source["name"], "increment": 8, "spec_hash": spec_hash(source)}}
+    with pytest.raises(ValueError, match="--start-dir"):
+        run_adaptive(shared, tmp_path / "shared", progress=False)
+    reference = pd.DataFrame(run_adaptive(scratch, tmp_path / "scratch", progress=False))
+    history = pd.DataFrame(run_adaptive(shared, tmp_path / "shared", progress=False, start_dir=source_dir))
+    assert reference.phi_max.iloc[-1] > 0.99 and reference.remeshes[8:].sum() > 0   # the crack ran (and remeshed) after the shared part
+    np.testing.assert_allclose(history.reaction_force, reference.reaction_force, rtol=1e-6, atol=1e-9 * reference.reaction_force.max())
+    np.testing.assert_array_equal(history.dofs, reference.dofs)
+    fields = tmp_path / "shared" / run_files.FIELDS
+    assert run_files.saved_increments(fields) == [4, 8, 20, 40]
+    for ours, theirs in zip(run_files.read_states(fields), run_files.read_states(tmp_path / "scratch" / run_files.FIELDS), strict=True):
+        np.testing.assert_allclose(ours["phase_field_gp"], theirs["phase_field_gp"], atol=1e-6)
+    assert run_files.read_provenance(tmp_path / "shared")["start_from"] == shared["start_from"]
+
+
+def test_paper_adaptive_runs_share_the_schedule_prefix(paper_config):
+    from ifenn.config import adaptive_shared_prefix
+
+    starts = {run: (s["run"], s["increment"]) for run in paper_config["adaptive_runs"] if (s := adaptive_shared_prefix(paper_config, run))}
+    # the verified runs keep their network step's state: they never share
+    assert starts == {"snt1-III-adaptive": ("snt1-II-adaptive", 500), "snt1-III-fine-adaptive": ("snt1-II-fine-adaptive", 500)}
+
+
 def test_adaptive_run_under_shear_keeps_the_slit_open(quick_config, tmp_path_factory):
     """The shear-loaded single-edge notch (mixed mode; the slit's faces slide and the damage is
     not symmetric about it): the adaptive run against FEM on twice the elements, nearer than FEM

@@ -2,7 +2,7 @@
 
   python -m ifenn fem   --spec SPEC.json --mesh MESH.xdmf --out DIR
   python -m ifenn ifenn --spec SPEC.json --mesh MESH.xdmf [--fem-dir FEM_RUN_DIR] [--model MODEL.pt] [--device D] --out DIR
-  python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] [--device D] --out DIR   (a mesh that follows the crack; one process)
+  python -m ifenn adaptive --spec SPEC.json [--model MODEL.pt] [--device D] --out DIR [--start-dir DIR]   (a mesh that follows the crack; one process)
   python -m ifenn pair  --fem-spec SPEC.json --ifenn-spec SPEC.json --mesh MESH.xdmf --model MODEL.pt [--device D]
                         --fem-out DIR --ifenn-out DIR --table CSV --increments-table CSV
                         (a FEM run and its whole-path IFENN run interleaved in one process: both run directories
@@ -45,6 +45,8 @@ def main(argv=None) -> int:
     adaptive.add_argument("--spec", required=True, help="resolved run spec (JSON, from config.adaptive_run_spec)")
     adaptive.add_argument("--model", default=None, help="trained PICNN (a verified IFENN run)")
     adaptive.add_argument("--out", required=True)
+    adaptive.add_argument("--start-dir", default=None,
+                          help="output directory of the adaptive run whose saved state this one starts from (a spec with start_from)")
     adaptive.add_argument("--no-progress", action="store_true")
     cell = sub.add_parser("cell", help="one stability-sweep cell: FEM, or IFENN continuing --fem-dir; failures are recorded")
     cell.add_argument("--spec", required=True)
@@ -119,7 +121,9 @@ def main(argv=None) -> int:
 
         with open(args.spec) as stream:
             spec = json.load(stream)
-        run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device)
+        if spec.get("start_from") is not None and args.start_dir is None:
+            parser.error(f"run {spec['name']} starts from run {spec['start_from']['run']}'s saved state: --start-dir is needed")
+        run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device, start_dir=args.start_dir)
     elif args.command == "pair":
         from ifenn.io import write_csv
         from ifenn.studies.whole_run_benchmark import paired_whole_run

@@ -39,8 +39,10 @@ SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.
 #: the datasets of a saved increment; the first two are the pixel maps
 FIELD_KEYS = ("history", "phase_field_gp", "phase_field", "displacement")
 MAP_KEYS = FIELD_KEYS[:2]
-#: written where a state has them: the leaf level of each fine cell of an adaptive mesh (ifenn.adaptive)
-OPTIONAL_KEYS = ("leaf_level",)
+#: written where a state has them (ifenn.adaptive): the leaf level of each fine cell of an adaptive
+#: mesh, and the pixels of the fine regions a run continues from (``region``: the last increment's,
+#: ``mesh_region``: the one the mesh was built from)
+OPTIONAL_KEYS = ("leaf_level", "region", "mesh_region")
 #: the pixel grid's root attributes
 GRID_ATTRS = ("x0", "y0", "h_px", "nx_px", "ny_px")
 

@@ -6,7 +6,7 @@ rule adaptive_spec:
     output:
         "results/adaptive/{run}/spec.json",
     params:
-        spec=lambda w: json.dumps(adaptive_run_spec(config, w.run), sort_keys=True),
+        spec=lambda w: json.dumps(adaptive_run_spec_shared(config, w.run), sort_keys=True),
     log:
         "logs/adaptive/{run}_spec.log",
     benchmark:
@@ -29,6 +29,7 @@ rule adaptive:
         device=config["device"],  # where the network runs (ifenn.device)
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         out=lambda w, output: os.path.dirname(output.history),
+        start=adaptive_start_argument,
     threads: 1
     resources:
         mem_mb=4000,
@@ -40,7 +41,7 @@ rule adaptive:
     benchmark:
         "benchmarks/adaptive/{run}.tsv"
     shell:
-        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} {params.model} --device {params.device} --out {params.out} > {log} 2>&1"
+        "OMP_NUM_THREADS=1 {params.python} -m ifenn adaptive --spec {input.spec} {params.model} --device {params.device} --out {params.out} {params.start} > {log} 2>&1"
 
 
 rule adaptive_resolution:

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn.config import (ConfigError, adaptive_run_spec, fem_run_spec_shared, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
+from ifenn.config import (ConfigError, adaptive_run_spec_shared, adaptive_shared_prefix, fem_run_spec_shared, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
                           paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
                           validate_config)
 from ifenn.studies import stability as _stability
@@ -247,12 +247,29 @@ def whole_path_inputs(wildcards):
     return sorted(paths)
 
 
+def adaptive_start(run):
+    """The other adaptive run's saved state this one starts from (ifenn.config.adaptive_shared_prefix), or None."""
+    key = ("adaptive", run)
+    if key not in _SHARED_PREFIX:
+        _SHARED_PREFIX[key] = adaptive_shared_prefix(config, run)
+    return _SHARED_PREFIX[key]
+
+
 def adaptive_inputs(wildcards):
-    """An adaptive run's spec, and the network where it is a verified IFENN run."""
+    """An adaptive run's spec, the network where it is a verified IFENN run, and the outputs of
+    the run it starts from (adaptive_start)."""
     inputs = {"spec": f"results/adaptive/{wildcards.run}/spec.json"}
     if config["adaptive_runs"][wildcards.run].get("ifenn_run"):
         inputs["model"] = "results/picnn/model.pt"
+    start = adaptive_start(wildcards.run)
+    if start is not None:
+        inputs.update(start_fields=f"results/adaptive/{start['run']}/fields.h5", start_history=f"results/adaptive/{start['run']}/history.csv")
     return inputs
+
+
+def adaptive_start_argument(wildcards):
+    start = adaptive_start(wildcards.run)
+    return "" if start is None else f"--start-dir results/adaptive/{start['run']}"
 
 
 def adaptive_resolution_cases():

@@ -165,7 +165,7 @@ class AdaptiveRun:
     """One run on a displacement mesh that follows the crack (module doc)."""
 
     def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None,
-                 device="auto"):
+                 device="auto", start_dir: str | Path | None = None):
         from ifenn.hybrid.verification import PixelEquation
 
         self.spec, self.out_dir = spec, Path(out_dir)
@@ -186,6 +186,10 @@ class AdaptiveRun:
         if self.loads.adaptive:
             raise ValueError("adaptive meshes run fixed load schedules only (an adaptive step controller is not wired in)")
         self.progress, self.hash = progress, spec_hash(spec)
+        self.start_dir = start_dir
+        if spec.get("start_from") is not None and start_dir is None:
+            raise ValueError(f"run {spec['name']} starts from run {spec['start_from']['run']}'s increment "
+                             f"{spec['start_from']['increment']}: its output directory is needed (--start-dir)")
         self.rows: list[dict] = []
         self.history = initial_history(self.scene, self.material, self.grid)
         self.phi = np.zeros(self.grid.shape)
@@ -249,14 +253,47 @@ class AdaptiveRun:
                                                                  "mesh_region": self.mesh_region,
                                                                  "rows": rows, "increment": increment, "spec_hash": self.hash})
 
+    def _start(self) -> int:
+        """The state of the run this one continues (spec ``start_from``,
+        :func:`ifenn.config.adaptive_shared_prefix`) at its increment k, its rows 1..k, and its
+        saved increments up to k copied as this run's own; returns k (0 without ``start_from``)."""
+        start = self.spec.get("start_from")
+        if start is None:
+            return 0
+        fields = Path(self.start_dir) / run_files.FIELDS
+        found = str(run_files.fields_attrs(fields).get("spec_hash"))
+        if found != start["spec_hash"]:
+            raise ValueError(f"{fields} is not run {start['run']} of spec hash {start['spec_hash']} (it has {found}): "
+                             f"rerun {start['run']} first")
+        k = int(start["increment"])
+        keys = (*run_files.FIELD_KEYS, *run_files.OPTIONAL_KEYS)
+        try:
+            states = run_files.read_states(fields, sorted({i for i in self.spec["save_fields"] if i <= k} | {k}), keys=keys)
+        except KeyError as error:
+            raise KeyError(f"run {start['run']} did not save what {self.spec['name']} starts from ({error}): rerun {start['run']}") from None
+        for state in states:
+            path = self.work_dir / f"fields_{state['increment']:06d}.npz"
+            if state["increment"] in self.spec["save_fields"] and not path.exists():
+                run_files.write_state(path, state)
+        last = states[-1]
+        self.history, self.phi = last["history"], last["phase_field_gp"]
+        self.region, self.mesh_region = last["region"].astype(bool), last["mesh_region"].astype(bool)
+        history = run_files.read_history(self.start_dir)
+        self.rows = history[history.increment <= k].to_dict("records")
+        for row in self.rows:
+            for key in INTEGER_COLUMNS:
+                row[key] = int(row[key])
+        log.info("%s starts from %s's increment %d", self.spec["name"], start["run"], k)
+        return k
+
     def _resume(self) -> int:
         path = self.work_dir / "checkpoint.npz"
         if not path.exists():
-            return 0
+            return self._start()
         data = run_files.read_state(path)
         if str(data["spec_hash"]) != self.hash:
             log.warning("ignoring checkpoint of another configuration (%s)", path)
-            return 0
+            return self._start()
         self.history, self.phi = data["history"], data["phase_field"]
         self.region, self.mesh_region = data["region"].astype(bool), data["mesh_region"].astype(bool)
         self.rows = [dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()]
@@ -270,7 +307,8 @@ class AdaptiveRun:
         problem = self.problem
         run_files.write_state(self.work_dir / f"fields_{increment:06d}.npz", {
             "increment": increment, "u": u, "history": self.history, "phase_field_gp": self.phi, "phase_field": self.phi.ravel(),
-            "displacement": problem.displacement_at_pixels(), "leaf_level": problem.tree.leaf_level})
+            "displacement": problem.displacement_at_pixels(), "leaf_level": problem.tree.leaf_level,
+            "region": self.region, "mesh_region": self.mesh_region})
 
     # ------------------------------------------------------------------ loop
     def run(self) -> list[dict]:
@@ -364,22 +402,23 @@ class AdaptiveRun:
         attrs = {**self.grid.attrs(), "run": self.spec["name"], "spec_hash": self.hash, "switch_increment": -1}
         run_files.write_fields(self.out_dir / run_files.FIELDS, attrs, states())
         run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=COLUMNS))
+        extra = {"start_from": self.spec["start_from"]} if self.spec.get("start_from") is not None else {}
         run_files.write_provenance(self.out_dir, provenance(self.hash, wall_s, run=self.spec["name"], mpi_ranks=1,
                                                            phase_field_step="verified" if self.verified else "pixel-exact", increments=len(self.rows),
-                                                           displacement_mesh="adaptive", **device_record(self.device)))
+                                                           displacement_mesh="adaptive", **device_record(self.device), **extra))
         for path in self.work_dir.glob("*"):
             path.unlink()
         self.work_dir.rmdir()
 
 
 def run_adaptive(spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None,
-                 device="auto") -> list[dict]:
+                 device="auto", start_dir: str | Path | None = None) -> list[dict]:
     """Run ``spec`` (:func:`ifenn.config.adaptive_run_spec`) on a mesh that follows the crack,
     with the trained network at ``model_path`` for a verified IFENN run; one process at a time
-    writes ``out_dir``."""
+    writes ``out_dir``. ``start_dir``: the run it starts from, when the spec has ``start_from``."""
     from mpi4py import MPI
 
     if MPI.COMM_WORLD.size > 1:
         raise RuntimeError("adaptive-mesh runs are serial: start them on one process")
     with run_files.exclusive_writer(out_dir, MPI.COMM_WORLD):
-        return AdaptiveRun(spec, out_dir, progress, model_path, device).run()
+        return AdaptiveRun(spec, out_dir, progress, model_path, device, start_dir).run()
