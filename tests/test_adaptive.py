@@ -209,7 +209,9 @@ def test_adaptive_run_that_repeats_another_runs_first_increments_starts_from_its
     assert run_files.saved_increments(fields) == [4, 8, 20, 40]
     for ours, theirs in zip(run_files.read_states(fields), run_files.read_states(tmp_path / "scratch" / run_files.FIELDS), strict=True):
         np.testing.assert_allclose(ours["phase_field_gp"], theirs["phase_field_gp"], atol=1e-6)
-    assert run_files.read_provenance(tmp_path / "shared")["start_from"] == shared["start_from"]
+    record = run_files.read_provenance(tmp_path / "shared")
+    assert record["start_from"] == shared["start_from"]
+    assert record["start_wall_s"] == pytest.approx(adaptive_and_fine[2].t_increment_s[:8].sum())
 
 
 def test_paper_adaptive_runs_share_the_schedule_prefix(paper_config):

@@ -134,7 +134,7 @@ def test_a_run_that_repeats_another_runs_first_increments_starts_from_its_state(
     # saved state at 20 and must end as the run computed from its first increment (a direct
     # solver: to round-off), with the same rows and the same saved fields
     from ifenn.config import deep_merge, fem_run_spec, fem_run_spec_shared, shared_prefix
-    from ifenn.run_files import read_provenance, read_states, saved_increments
+    from ifenn.run_files import read_provenance, read_run_wall, read_states, saved_increments
 
     config = deep_merge(quick_config, {"solver": {"linear_solvers": "direct"}})
     start = shared_prefix(config, "snt1-III")
@@ -161,7 +161,11 @@ def test_a_run_that_repeats_another_runs_first_increments_starts_from_its_state(
     for ours, theirs in zip(read_states(fields), read_states(expected), strict=True):
         for key in ("phase_field", "displacement", "history"):
             np.testing.assert_allclose(ours[key], theirs[key], rtol=1e-8, atol=1e-10 * np.abs(theirs[key]).max())
-    assert read_provenance(tmp_path / "shared")["start_from"] == start
+    record = read_provenance(tmp_path / "shared")
+    assert record["start_from"] == start
+    # the run's cost counts the increments it took over (studies compare whole runs)
+    assert record["start_wall_s"] == pytest.approx(_history(tmp_path, "snt1-I").t_increment_s[:20].sum())
+    assert read_run_wall(tmp_path / "shared") == pytest.approx(record["wall_time_s"] + record["start_wall_s"])
     # a start whose run changed since: refused, naming the run to rerun
     stale = {**shared, "start_from": {**start, "spec_hash": "0000"}}
     with pytest.raises(ValueError, match="rerun snt1-I"):

@@ -216,5 +216,12 @@ def read_provenance(run_dir: str | Path) -> dict:
     return json.loads((Path(run_dir) / PROVENANCE).read_text())
 
 
+def read_run_wall(run_dir: str | Path) -> float:
+    """The whole run's wall time: provenance.json's ``wall_time_s`` plus ``start_wall_s``, the
+    increments it took over from the run it started from (:func:`ifenn.config.shared_prefix`)."""
+    record = read_provenance(run_dir)
+    return float(record["wall_time_s"]) + float(record.get("start_wall_s") or 0.0)
+
+
 def write_provenance(run_dir: str | Path, record: dict) -> None:
     write_json(Path(run_dir) / PROVENANCE, record)

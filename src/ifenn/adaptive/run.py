@@ -402,7 +402,10 @@ class AdaptiveRun:
         attrs = {**self.grid.attrs(), "run": self.spec["name"], "spec_hash": self.hash, "switch_increment": -1}
         run_files.write_fields(self.out_dir / run_files.FIELDS, attrs, states())
         run_files.write_history(self.out_dir, pd.DataFrame(self.rows, columns=COLUMNS))
-        extra = {"start_from": self.spec["start_from"]} if self.spec.get("start_from") is not None else {}
+        extra = {}
+        if self.spec.get("start_from") is not None:   # the increments taken over count in the run's cost
+            k = int(self.spec["start_from"]["increment"])
+            extra = {"start_from": self.spec["start_from"], "start_wall_s": float(sum(r["t_increment_s"] for r in self.rows[:k]))}
         run_files.write_provenance(self.out_dir, provenance(self.hash, wall_s, run=self.spec["name"], mpi_ranks=1,
                                                            phase_field_step="verified" if self.verified else "pixel-exact", increments=len(self.rows),
                                                            displacement_mesh="adaptive", **device_record(self.device), **extra))

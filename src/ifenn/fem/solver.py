@@ -405,7 +405,10 @@ def fem_run(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bo
         start["increment"] = comm.bcast(start["increment"], root=0)
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
-    provenance_extra = {"start_from": spec["start_from"]} if start is not None else None
+    # the increments taken over count in the run's cost (studies compare whole runs)
+    provenance_extra = {"start_from": spec["start_from"],
+                        "start_wall_s": float(sum(row["t_increment_s"] for row in start["rows"])) if comm.rank == 0 else None
+                        } if start is not None else None
     return StaggeredRun(problem, FEMPhaseField(problem, spec["petsc"]["phase_field"]), spec, out_dir, progress, start=start,
                         provenance_extra=provenance_extra)
 

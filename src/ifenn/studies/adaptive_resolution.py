@@ -8,7 +8,9 @@ runs "fem-adaptive", the certified pixel solve, or "verified-adaptive", the veri
 - ``peak_error_vs_fine_pct``: (peak |F| / the finer FEM's peak - 1), percent;
 - ``post_peak_rms_vs_fine_pct``: RMS of |F| - |F_fine| (the finer curve interpolated at the run's
   u) over the run's increments after the finer FEM's peak, over the finer peak, percent;
-- ``wall_s`` (provenance.json's wall_time_s) and ``wall_fem_h_s``, the FEM run at h's, from the same DAG;
+- ``wall_s`` (provenance.json's wall_time_s, plus ``start_wall_s``, the increments a run took over
+  from the run it starts from: :func:`ifenn.config.shared_prefix`) and ``wall_fem_h_s``, the FEM run
+  at h's, from the same DAG;
 - ``dofs_fraction_of_fine``: the run's mean displacement dofs over the increments, over those of
   the finer uniform mesh (``fine_uniform_dofs``: 2 per node, the slits' twins included; also where
   the finer reference itself is an adaptive run), and the largest fraction;
@@ -26,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ifenn.run_files import read_history, read_provenance, read_spec
+from ifenn.run_files import read_history, read_run_wall, read_spec
 from ifenn.studies.metrics import fine_label, post_peak_rms
 
 TARGETS = {"post_peak_rms_pct": 2.0, "peak_error_pct": 1.0, "dofs_fraction": 0.30}
@@ -76,8 +78,7 @@ def adaptive_resolution_table(cases: dict[str, dict]) -> pd.DataFrame:
         adaptive = {run: read_history(path) for run, path in where["adaptive_dirs"].items()}
         methods = {run: "verified-adaptive" if read_spec(path).get("ifenn_run") else "fem-adaptive"
                    for run, path in where["adaptive_dirs"].items()}
-        wall = {"fem": read_provenance(where["fem_dir"])["wall_time_s"],
-                **{run: read_provenance(path)["wall_time_s"] for run, path in where["adaptive_dirs"].items()}}
+        wall = {"fem": read_run_wall(where["fem_dir"]), **{run: read_run_wall(path) for run, path in where["adaptive_dirs"].items()}}
         for row in resolution_rows(read_history(where["fem_dir"]), read_history(where["fine_dir"]), adaptive,
                                    uniform_dofs(fine_scene), uniform_dofs(fem_scene), wall, methods):
             rows.append({"case": case, "fem_run": where["fem_run"], "fine_fem_run": where["fine_fem_run"],
