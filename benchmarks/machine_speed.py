@@ -1,0 +1,65 @@
+"""How fast this machine is, in the unit the workflow spends most in: one direct solve of the
+paper's snt1 displacement matrix (200 x 200 Q1 elements, 80,922 dofs, phi = 0) by MUMPS's
+Cholesky, factorisation and solve, one core.
+
+The sessions' machines differ up to ~3x (environment-notes.md, twentieth session): seconds
+measured on different days compare only after scaling by this number. Run it before timing
+the paper DAG and quote it beside the DAG's time. Reference values: 0.14 s (2026-12-06, the
+machine of the eighteenth session's 66.5-minute DAG), 0.37 s (the twentieth session's).
+
+    .venv/bin/python benchmarks/machine_speed.py [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from petsc4py import PETSc
+
+from ifenn.config import REPO, fem_run_spec, load_config
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--repeat", type=int, default=5, help="solves timed after a first one (default 5)")
+    args = parser.parse_args()
+    import dolfinx.fem.petsc as fem_petsc
+
+    from ifenn.fem.mesh import build_mesh, read_dolfinx_mesh, write_mesh
+    from ifenn.fem.problem import FractureProblem
+
+    config = load_config(REPO / "config" / "config.yaml")
+    spec = fem_run_spec(config, "snt1-II")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "snt1.xdmf"
+        write_mesh(build_mesh(spec["scene"]), path)
+        problem = FractureProblem(read_dolfinx_mesh(path), spec["scene"], spec["material"],
+                                  config["solver"]["linear_solver_presets"]["direct"])
+    A = fem_petsc.assemble_matrix(problem.equilibrium_form, bcs=problem.bcs)
+    A.assemble()
+    ksp = PETSc.KSP().create(PETSc.COMM_SELF)
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    ksp.getPC().setType(PETSc.PC.Type.CHOLESKY)
+    ksp.getPC().setFactorSolverType("mumps")
+    ksp.setOperators(A)
+    b, x = A.createVecs()
+    b.set(1.0)
+    seconds = []
+    for _ in range(args.repeat + 1):
+        A.scale(2.0)   # new values: a numeric factorisation each time, as in a run
+        A.scale(0.5)
+        started = time.perf_counter()
+        ksp.solve(b, x)
+        seconds.append(time.perf_counter() - started)
+    print(f"snt1 displacement matrix ({A.getSize()[0]:,} dofs), MUMPS Cholesky factor + solve, one core: "
+          f"median {np.median(seconds[1:]):.3f} s over {args.repeat} (first, with the analysis: {seconds[0]:.3f} s); "
+          "the eighteenth session's machine: 0.14 s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
