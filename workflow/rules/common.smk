@@ -79,23 +79,31 @@ def fem_spec_json(run):
 
 
 def _fem_cost(run):
-    """A FEM run's expected cost: increments x elements x staggered passes (3 when converged;
-    an adaptive schedule counts as 1000 increments)."""
+    """A FEM run's expected cost: the increments it computes (not those it takes over from the run
+    it starts from, fem_start) x elements x staggered passes (3 when converged; an adaptive
+    schedule counts as 1000 increments)."""
     entry = config["fem_runs"][run]
     increments = schedule_increments(config["schedules"][entry["schedule"]]) or 1000
+    start = fem_start(run)
     nx, ny = config["scenes"][entry["scene"]]["elements"]
     passes = 3 if entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1 else 1
-    return increments * nx * ny * passes
+    return (increments - (start["increment"] if start else 0)) * nx * ny * passes
+
+
+def _fem_path(run):
+    """The cost of a FEM run and of the longest chain of runs that start from it (they wait for it)."""
+    after = [other for other in config["fem_runs"] if (fem_start(other) or {}).get("run") == run]
+    return _fem_cost(run) + max((_fem_path(other) for other in after), default=0)
 
 
 def fem_priority(wildcards):
     """Scheduling priority of a FEM run: the PICNN's training run first (every IFENN run waits
-    for the network), then the others longest first (10..90), so the longest job does not
-    start last behind short ones."""
+    for the network), then the others longest path first (10..90: a run and those that start
+    from its state), so the longest chain does not start last behind short ones."""
     if wildcards.run == config["picnn"]["training_run"]:
         return 100
-    longest = max(_fem_cost(run) for run in config["fem_runs"])
-    return 10 + int(80 * _fem_cost(wildcards.run) / longest)
+    longest = max(_fem_path(run) for run in config["fem_runs"])
+    return 10 + int(80 * _fem_path(wildcards.run) / longest)
 
 
 def lc_over_h(fem_run):
