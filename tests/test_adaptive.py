@@ -74,6 +74,27 @@ def test_slit_nodes_are_doubled_for_the_upper_side_and_the_tip_is_shared():
     assert np.isin(tree.masters[y > 16], twins).any()
 
 
+def test_grown_region_is_the_square_dilation_of_the_core():
+    """grown() filters the core's bounding box only: the same pixels as the square maximum filter
+    on the whole image, for a core at an edge, in a corner, scattered, and empty."""
+    import scipy.ndimage
+
+    from ifenn.adaptive.run import grown
+
+    rng = np.random.default_rng(3)
+    material, h_px = {"lc": 0.03}, 0.01   # by_lc 1 -> a half-width of 3 pixels
+    cores = [np.zeros((40, 50), dtype=bool) for _ in range(4)]
+    cores[0][20, :6] = True                                  # a slit from the left edge
+    cores[1][-2:, -1] = True                                 # a corner
+    cores[2][rng.random((40, 50)) > 0.995] = True            # scattered pixels
+    for core in cores:
+        for by_lc in (0.0, 1.0, 2.5):
+            by = int(np.ceil(by_lc * material["lc"] / h_px))
+            expected = scipy.ndimage.maximum_filter(core, size=2 * by + 1, mode="constant")
+            np.testing.assert_array_equal(grown(core, by_lc, material, h_px), expected)
+    assert grown(cores[0], 1.0, material, h_px).sum() == (6 + 3) * 7
+
+
 # ------------------------------------------------------------------ the mesh problem
 SCENE = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [16, 16],
          "boundary": {"bottom": {"y": "fixed"}, "left": {"x": "fixed"}, "top": {"y": "load"}}}

@@ -156,9 +156,20 @@ def crack_core(phi: np.ndarray, energy: np.ndarray, material: dict, settings: Me
 
 
 def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.ndarray:
-    """``core`` grown by ``by_lc`` phase-field lengths (a square of that half-width)."""
+    """``core`` grown by ``by_lc`` phase-field lengths (a square of that half-width). Filtered on
+    the core's bounding box grown by the half-width only (nothing outside it can be reached): the
+    same pixels as the filter on the whole image, at a fraction of its cost while the core is small
+    (it was 11 % of an increment on an 800 x 800 image)."""
     by = int(np.ceil(by_lc * material["lc"] / h_px))
-    return scipy.ndimage.maximum_filter(core, size=2 * by + 1, mode="constant") if by else core.copy()
+    if not by:
+        return core.copy()
+    out = np.zeros_like(core)
+    rows, cols = np.flatnonzero(core.any(axis=1)), np.flatnonzero(core.any(axis=0))
+    if rows.size == 0:
+        return out
+    box = (slice(max(rows[0] - by, 0), rows[-1] + by + 1), slice(max(cols[0] - by, 0), cols[-1] + by + 1))
+    out[box] = scipy.ndimage.maximum_filter(core[box], size=2 * by + 1, mode="constant")
+    return out
 
 
 class AdaptiveRun:
@@ -373,16 +384,17 @@ class AdaptiveRun:
                 times["t_phase_field_s"] += time.perf_counter() - t
                 if np.abs(phi - before).max() < spec["stagger_tolerance"]:
                     break
-            outside = not self.inside_fine(self._fine_region(phi, energy, settings.trigger_lc))
+            core = crack_core(phi, energy, self.material, settings)
+            outside = not self.inside_fine(grown(core, settings.trigger_lc, self.material, self.grid.h_px))
             if not outside or remeshes == settings.max_remesh:
                 break
             t = time.perf_counter()
-            pending = pending | self._fine_region(phi, energy)
+            pending = pending | grown(core, settings.buffer_lc, self.material, self.grid.h_px)
             self.build_mesh(pending)
             times["t_remesh_s"] += time.perf_counter() - t
             remeshes += 1
         self.history, self.phi = history, phi
-        self.region = self._fine_region(phi, energy)
+        self.region = grown(core, settings.buffer_lc, self.material, self.grid.h_px)
         force = problem.reaction_force()
         if not np.isfinite(force):
             raise FloatingPointError(f"non-finite reaction force {force}")
