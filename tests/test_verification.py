@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
-from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _boxes, _dilated, normalised_residual
+from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _boxes, dilated, normalised_residual
 from ifenn.network.orbit import OrbitEvaluator
 from ifenn.network.picnn import PICNN, InputScaling, residual, solve_pixel_equation
 from ifenn.network.training import synthetic_history
@@ -102,7 +102,7 @@ def test_correction_boxes_cover_every_pixel_within_the_margin(margin):
         cover = np.zeros_like(mask)
         for box in _boxes(mask, margin):
             cover[box] = True
-        assert not (_dilated(mask, margin) & ~cover).any()
+        assert not (dilated(mask, margin) & ~cover).any()
 
 
 def test_the_exact_solution_as_prediction_corrects_nothing(history):

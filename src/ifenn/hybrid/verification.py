@@ -303,7 +303,7 @@ def _bounding_box(mask: np.ndarray, grow: int) -> Box | None:
     return grow_box((slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)), grow, mask.shape)
 
 
-def _dilated(mask: np.ndarray, by: int) -> np.ndarray:
+def dilated(mask: np.ndarray, by: int) -> np.ndarray:
     """``mask`` grown by ``by`` pixels (square), computed on its bounding box only."""
     crop = _bounding_box(mask, by)
     out = np.zeros_like(mask)
@@ -334,7 +334,7 @@ def _boxes(mask: np.ndarray, margin: int) -> list[Box]:
         padded = np.zeros((ny * block, nx * block), bool)
         padded[:sub.shape[0], :sub.shape[1]] = sub
         sub = padded.reshape(ny, block, nx, block).any(axis=(1, 3))
-    grown = _dilated(sub, -(-margin // block))
+    grown = dilated(sub, -(-margin // block))
     labels, _ = scipy.ndimage.label(grown, structure=np.ones((3, 3), int))
     shape = mask.shape
     boxes = [tuple(slice(min(c.start + s.start * block, n), min(c.start + s.stop * block, c.stop, n))
