@@ -133,14 +133,14 @@ def test_a_run_that_repeats_another_runs_first_increments_starts_from_its_state(
     # quick schedule III repeats schedule I's first 20 increments: snt1-III starts from snt1-I's
     # saved state at 20 and must end as the run computed from its first increment (a direct
     # solver: to round-off), with the same rows and the same saved fields
-    from ifenn.config import deep_merge, fem_run_spec, fem_run_spec_shared, shared_prefix
+    from ifenn.config import deep_merge, fem_run_spec, shared_prefix
     from ifenn.run_files import read_provenance, read_run_wall, read_states, saved_increments
 
     config = deep_merge(quick_config, {"solver": {"linear_solvers": "direct"}})
     start = shared_prefix(config, "snt1-III")
     assert start is not None and start["run"] == "snt1-I" and start["increment"] == 20
     assert shared_prefix(deep_merge(config, {"solver": {"share_load_prefix": False}}), "snt1-III") is None
-    source, shared = fem_run_spec(config, "snt1-I"), fem_run_spec_shared(config, "snt1-III")
+    source, shared = fem_run_spec(config, "snt1-I"), {**fem_run_spec(config, "snt1-III"), "start_from": start}
     mesh = _mesh(source, tmp_path)
     run_fem(source, mesh, tmp_path / "snt1-I", progress=False)
     scratch = fem_run_spec(config, "snt1-III")

@@ -719,25 +719,6 @@ def adaptive_shared_prefix(config: dict, run: str) -> dict | None:
     return _longest_shared_prefix(mine, others)
 
 
-def adaptive_run_spec_shared(config: dict, run: str) -> dict:
-    """:func:`adaptive_run_spec` plus ``start_from`` (:func:`adaptive_shared_prefix`)."""
-    spec = adaptive_run_spec(config, run)
-    start = adaptive_shared_prefix(config, run)
-    if start is not None:
-        spec["start_from"] = start
-    return spec
-
-
-def fem_run_spec_shared(config: dict, run: str) -> dict:
-    """:func:`fem_run_spec` plus ``start_from`` (:func:`shared_prefix`) where the run starts
-    from another run's saved state: the spec the workflow's FEM rule runs."""
-    spec = fem_run_spec(config, run)
-    start = shared_prefix(config, run)
-    if start is not None:
-        spec["start_from"] = start
-    return spec
-
-
 IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
 
 

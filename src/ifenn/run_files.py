@@ -216,6 +216,34 @@ def read_provenance(run_dir: str | Path) -> dict:
     return json.loads((Path(run_dir) / PROVENANCE).read_text())
 
 
+def take_over(start: dict, start_dir: str | Path, work_dir: str | Path, save: Iterable[int],
+              keys: Iterable[str] = FIELD_KEYS) -> tuple[dict, list[dict]]:
+    """The start of a run whose first increments another run computed (a spec's ``start_from``:
+    {'run', 'increment' k, 'spec_hash'}; :func:`ifenn.config.shared_prefix`): the other run's saved
+    state at k (``keys``) and its history rows 1..k, read from ``start_dir``. Its saved increments
+    up to k among ``save`` and its switch-over increment are copied into ``work_dir`` as this run's
+    own (fields.h5 then holds them as if computed here). Raises, naming the run to rerun, when
+    ``start_dir`` holds another spec's outputs or lacks one of those increments."""
+    fields, k = Path(start_dir) / FIELDS, int(start["increment"])
+    attrs = fields_attrs(fields)
+    if str(attrs.get("spec_hash")) != start["spec_hash"]:
+        raise ValueError(f"{fields} is not run {start['run']} of spec hash {start['spec_hash']} (it has {attrs.get('spec_hash')}): "
+                         f"rerun {start['run']} first")
+    switch = int(attrs.get("switch_increment", -1))
+    copied = {i for i in save if i <= k} | ({switch} if 0 < switch <= k else set())
+    try:
+        states = read_states(fields, sorted(copied | {k}), keys=keys)
+    except KeyError as error:
+        raise KeyError(f"run {start['run']} did not save what this run starts from ({error}): rerun {start['run']}") from None
+    Path(work_dir).mkdir(parents=True, exist_ok=True)
+    for state in states:
+        path = Path(work_dir) / f"fields_{state['increment']:06d}.npz"
+        if state["increment"] in copied and not path.exists():
+            write_state(path, state)
+    history = read_history(start_dir)
+    return states[-1], history[history.increment <= k].to_dict("records")
+
+
 def read_run_wall(run_dir: str | Path) -> float:
     """The whole run's wall time: provenance.json's ``wall_time_s`` plus ``start_wall_s``, the
     increments it took over from the run it started from (:func:`ifenn.config.shared_prefix`)."""

@@ -6,7 +6,7 @@ rule adaptive_spec:
     output:
         "results/adaptive/{run}/spec.json",
     params:
-        spec=lambda w: json.dumps(adaptive_run_spec_shared(config, w.run), sort_keys=True),
+        spec=lambda w: run_spec_json("adaptive", w.run),
     log:
         "logs/adaptive/{run}_spec.log",
     benchmark:
@@ -29,7 +29,7 @@ rule adaptive:
         device=config["device"],  # where the network runs (ifenn.device)
         model=lambda w, input: f"--model {input.model}" if "model" in input.keys() else "",
         out=lambda w, output: os.path.dirname(output.history),
-        start=adaptive_start_argument,
+        start=start_argument("adaptive"),
     threads: 1
     resources:
         mem_mb=4000,

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 from snakemake.settings.types import DeploymentMethod
 
-from ifenn.config import (ConfigError, adaptive_run_spec_shared, adaptive_shared_prefix, fem_run_spec_shared, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
+from ifenn.config import (ConfigError, adaptive_run_spec, adaptive_shared_prefix, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
                           paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
                           validate_config)
 from ifenn.studies import stability as _stability
@@ -51,40 +51,48 @@ def identifier(name):
     return re.sub(r"\W", "_", name)
 
 
-_SHARED_PREFIX = {}
+_STARTS = {}
 
 
-def fem_start(run):
-    """The other FEM run's saved state this one starts from (ifenn.config.shared_prefix), or None."""
-    if run not in _SHARED_PREFIX:
-        _SHARED_PREFIX[run] = shared_prefix(config, run)
-    return _SHARED_PREFIX[run]
+def run_start(kind, run):
+    """The saved state of another run of ``kind`` (fem, adaptive) this one starts from
+    (ifenn.config.shared_prefix / adaptive_shared_prefix), or None."""
+    if (kind, run) not in _STARTS:
+        _STARTS[kind, run] = (shared_prefix if kind == "fem" else adaptive_shared_prefix)(config, run)
+    return _STARTS[kind, run]
 
 
-def fem_start_inputs(wildcards):
-    """The outputs of the run a FEM run starts from (none when it starts from its first increment)."""
-    start = fem_start(wildcards.run)
-    if start is None:
-        return {}
-    return {"start_fields": f"results/fem/{start['run']}/fields.h5", "start_history": f"results/fem/{start['run']}/history.csv"}
+def start_inputs(kind, run):
+    """The outputs of the run ``run`` starts from (none when it starts from its first increment)."""
+    start = run_start(kind, run)
+    return {} if start is None else {"start_fields": f"results/{kind}/{start['run']}/fields.h5",
+                                     "start_history": f"results/{kind}/{start['run']}/history.csv"}
 
 
-def fem_start_argument(wildcards):
-    start = fem_start(wildcards.run)
-    return "" if start is None else f"--start-dir results/fem/{start['run']}"
+def start_argument(kind):
+    """The rule's --start-dir argument (empty when the run starts from its first increment)."""
+    def argument(wildcards):
+        start = run_start(kind, wildcards.run)
+        return "" if start is None else f"--start-dir results/{kind}/{start['run']}"
+
+    return argument
 
 
-def fem_spec_json(run):
-    return json.dumps(fem_run_spec_shared(config, run), sort_keys=True)
+def run_spec_json(kind, run):
+    """A run's spec (fem, adaptive) as the workflow runs it: with ``start_from`` where it starts
+    from another run's saved state (run_start)."""
+    spec = (fem_run_spec if kind == "fem" else adaptive_run_spec)(config, run)
+    start = run_start(kind, run)
+    return json.dumps({**spec, "start_from": start} if start else spec, sort_keys=True)
 
 
 def _fem_cost(run):
     """A FEM run's expected cost: the increments it computes (not those it takes over from the run
-    it starts from, fem_start) x elements x staggered passes (3 when converged; an adaptive
+    it starts from, run_start) x elements x staggered passes (3 when converged; an adaptive
     schedule counts as 1000 increments)."""
     entry = config["fem_runs"][run]
     increments = schedule_increments(config["schedules"][entry["schedule"]]) or 1000
-    start = fem_start(run)
+    start = run_start("fem", run)
     nx, ny = config["scenes"][entry["scene"]]["elements"]
     passes = 3 if entry.get("stagger_max_iterations", config["solver"]["stagger_max_iterations"]) > 1 else 1
     return (increments - (start["increment"] if start else 0)) * nx * ny * passes
@@ -92,7 +100,7 @@ def _fem_cost(run):
 
 def _fem_path(run):
     """The cost of a FEM run and of the longest chain of runs that start from it (they wait for it)."""
-    after = [other for other in config["fem_runs"] if (fem_start(other) or {}).get("run") == run]
+    after = [other for other in config["fem_runs"] if (run_start("fem", other) or {}).get("run") == run]
     return _fem_cost(run) + max((_fem_path(other) for other in after), default=0)
 
 
@@ -255,29 +263,13 @@ def whole_path_inputs(wildcards):
     return sorted(paths)
 
 
-def adaptive_start(run):
-    """The other adaptive run's saved state this one starts from (ifenn.config.adaptive_shared_prefix), or None."""
-    key = ("adaptive", run)
-    if key not in _SHARED_PREFIX:
-        _SHARED_PREFIX[key] = adaptive_shared_prefix(config, run)
-    return _SHARED_PREFIX[key]
-
-
 def adaptive_inputs(wildcards):
     """An adaptive run's spec, the network where it is a verified IFENN run, and the outputs of
-    the run it starts from (adaptive_start)."""
+    the run it starts from (run_start)."""
     inputs = {"spec": f"results/adaptive/{wildcards.run}/spec.json"}
     if config["adaptive_runs"][wildcards.run].get("ifenn_run"):
         inputs["model"] = "results/picnn/model.pt"
-    start = adaptive_start(wildcards.run)
-    if start is not None:
-        inputs.update(start_fields=f"results/adaptive/{start['run']}/fields.h5", start_history=f"results/adaptive/{start['run']}/history.csv")
-    return inputs
-
-
-def adaptive_start_argument(wildcards):
-    start = adaptive_start(wildcards.run)
-    return "" if start is None else f"--start-dir results/adaptive/{start['run']}"
+    return {**inputs, **start_inputs("adaptive", wildcards.run)}
 
 
 def adaptive_resolution_cases():

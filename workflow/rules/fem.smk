@@ -7,7 +7,7 @@ rule fem_spec:
     output:
         "results/fem/{run}/spec.json",
     params:
-        spec=lambda w: fem_spec_json(w.run),
+        spec=lambda w: run_spec_json("fem", w.run),
     priority: 100  # instant; unlocks its FEM run (mesh.smk)
     log:
         "logs/fem/{run}_spec.log",
@@ -23,7 +23,7 @@ rule fem:
     wildcard_constraints:
         run=run_pattern(PAIRED_RUNS),  # the whole-run benchmark's FEM runs: rule whole_run_pair
     input:
-        unpack(fem_start_inputs),  # a run whose first increments another run computed (common.smk fem_start)
+        unpack(lambda w: start_inputs("fem", w.run)),  # a run whose first increments another run computed (common.smk run_start)
         spec="results/fem/{run}/spec.json",
         mesh=lambda w: f"results/mesh/{config['fem_runs'][w.run]['scene']}.xdmf",
     output:
@@ -36,7 +36,7 @@ rule fem:
         launcher=fem_launcher,
         python=PYTHON,
         out=lambda w, output: os.path.dirname(output.history),
-        start=fem_start_argument,
+        start=start_argument("fem"),
     threads: 1
     # the FEM runs are the long jobs and everything else waits on them: the training run first,
     # then longest first, before the short jobs whenever a core is free (common.smk fem_priority)

@@ -163,6 +163,14 @@ def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.nda
     return dilated(core, int(np.ceil(by_lc * material["lc"] / h_px)))
 
 
+def _typed(rows: list[dict]) -> list[dict]:
+    """History rows read back (a checkpoint's floats, a CSV's numpy numbers) with their integer columns as int."""
+    for row in rows:
+        for key in INTEGER_COLUMNS:
+            row[key] = int(row[key])
+    return rows
+
+
 class AdaptiveRun:
     """One run on a displacement mesh that follows the crack (module doc)."""
 
@@ -257,36 +265,18 @@ class AdaptiveRun:
 
     def _start(self) -> int:
         """The state of the run this one continues (spec ``start_from``,
-        :func:`ifenn.config.adaptive_shared_prefix`) at its increment k, its rows 1..k, and its
-        saved increments up to k copied as this run's own; returns k (0 without ``start_from``)."""
+        :func:`ifenn.config.adaptive_shared_prefix`, :func:`ifenn.run_files.take_over`) at its
+        increment k and its rows 1..k; returns k (0 without ``start_from``)."""
         start = self.spec.get("start_from")
         if start is None:
             return 0
-        fields = Path(self.start_dir) / run_files.FIELDS
-        found = str(run_files.fields_attrs(fields).get("spec_hash"))
-        if found != start["spec_hash"]:
-            raise ValueError(f"{fields} is not run {start['run']} of spec hash {start['spec_hash']} (it has {found}): "
-                             f"rerun {start['run']} first")
-        k = int(start["increment"])
-        keys = (*run_files.FIELD_KEYS, *run_files.OPTIONAL_KEYS)
-        try:
-            states = run_files.read_states(fields, sorted({i for i in self.spec["save_fields"] if i <= k} | {k}), keys=keys)
-        except KeyError as error:
-            raise KeyError(f"run {start['run']} did not save what {self.spec['name']} starts from ({error}): rerun {start['run']}") from None
-        for state in states:
-            path = self.work_dir / f"fields_{state['increment']:06d}.npz"
-            if state["increment"] in self.spec["save_fields"] and not path.exists():
-                run_files.write_state(path, state)
-        last = states[-1]
-        self.history, self.phi = last["history"], last["phase_field_gp"]
-        self.region, self.mesh_region = last["region"].astype(bool), last["mesh_region"].astype(bool)
-        history = run_files.read_history(self.start_dir)
-        self.rows = history[history.increment <= k].to_dict("records")
-        for row in self.rows:
-            for key in INTEGER_COLUMNS:
-                row[key] = int(row[key])
-        log.info("%s starts from %s's increment %d", self.spec["name"], start["run"], k)
-        return k
+        state, rows = run_files.take_over(start, self.start_dir, self.work_dir, self.spec["save_fields"],
+                                          keys=(*run_files.FIELD_KEYS, *run_files.OPTIONAL_KEYS))
+        self.history, self.phi = state["history"], state["phase_field_gp"]
+        self.region, self.mesh_region = state["region"].astype(bool), state["mesh_region"].astype(bool)
+        self.rows = _typed(rows)
+        log.info("%s starts from %s's increment %d", self.spec["name"], start["run"], state["increment"])
+        return int(state["increment"])
 
     def _resume(self) -> int:
         path = self.work_dir / "checkpoint.npz"
@@ -298,10 +288,7 @@ class AdaptiveRun:
             return self._start()
         self.history, self.phi = data["history"], data["phase_field"]
         self.region, self.mesh_region = data["region"].astype(bool), data["mesh_region"].astype(bool)
-        self.rows = [dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()]
-        for row in self.rows:
-            for key in INTEGER_COLUMNS:
-                row[key] = int(row[key])
+        self.rows = _typed([dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()])
         log.info("resuming %s after increment %d", self.spec["name"], int(data["increment"]))
         return int(data["increment"])
 

@@ -354,55 +354,28 @@ class StaggeredRun:
             tmp_dir.rmdir()
 
 
-def shared_start(spec: dict, start_dir: str | Path | None, work_dir: str | Path) -> dict | None:
-    """The start of a run whose first increments another run computed (spec ``start_from``,
-    :func:`ifenn.config.shared_prefix`), read on rank 0 from that run's directory: {'increment'
-    k, 'state', 'rows' 1..k}. The saved increments up to k that this run saves are copied into
-    ``work_dir`` as its own (fields.h5 and the ParaView file then hold them, as if computed
-    here). Raises if the other run's outputs are not those of the spec it names."""
-    from ifenn.hybrid.runs import switch_state
-
-    start = spec.get("start_from")
-    if start is None:
-        return None
-    if start_dir is None:
-        raise ValueError(f"run {spec['name']} starts from run {start['run']}'s increment {start['increment']}: "
-                         "its output directory is needed (--start-dir)")
-    fields = Path(start_dir) / run_files.FIELDS
-    found = str(run_files.fields_attrs(fields).get("spec_hash"))
-    if found != start["spec_hash"]:
-        raise ValueError(f"{fields} is not run {start['run']} of spec hash {start['spec_hash']} (it has {found}): "
-                         f"rerun {start['run']} first")
-    k = int(start["increment"])
-    increment, state, rows = switch_state(start_dir, k)
-    switch = int(run_files.fields_attrs(fields)["switch_increment"])
-    wanted = sorted({i for i in spec["save_fields"] if i <= k} | ({switch} if 0 < switch <= k else set()))
-    work_dir = Path(work_dir)
-    work_dir.mkdir(parents=True, exist_ok=True)
-    for saved in run_files.read_states(fields, wanted):
-        path = work_dir / f"fields_{saved['increment']:06d}.npz"
-        if not path.exists():
-            saved["phase_field"] = saved["phase_field"][:, None]
-            run_files.write_state(path, saved)
-    log.info("%s starts from %s's increment %d (%d saved increments copied)", spec["name"], start["run"], k, len(wanted))
-    return {"increment": increment, "state": state, "rows": rows}
-
-
 def fem_run(spec: dict, mesh_path: str | Path, out_dir: str | Path, progress: bool = True,
             start_dir: str | Path | None = None) -> StaggeredRun:
     """The plain-FEM run described by ``spec`` (config.fem_run_spec), set up, not started; the
     caller holds ``out_dir``'s lock (:func:`ifenn.run_files.exclusive_writer`). With
     ``start_from`` in the spec it continues the state of the run in ``start_dir``
-    (:func:`shared_start`)."""
+    (:func:`ifenn.run_files.take_over`)."""
     from ifenn.fem.mesh import read_dolfinx_mesh
     from ifenn.fem.phase_field import FEMPhaseField
     from ifenn.fem.problem import FractureProblem
 
     comm = MPI.COMM_WORLD
     start = None
-    if spec.get("start_from") is not None:
-        start = shared_start(spec, start_dir, Path(out_dir) / run_files.WORK) if comm.rank == 0 else {"increment": None, "state": None, "rows": None}
-        start["increment"] = comm.bcast(start["increment"], root=0)
+    if spec.get("start_from") is not None:   # the first increments another run computed (run_files.take_over)
+        start = {"increment": int(spec["start_from"]["increment"]), "state": None, "rows": None}
+        if comm.rank == 0:
+            if start_dir is None:
+                raise ValueError(f"run {spec['name']} starts from run {spec['start_from']['run']}'s saved state: "
+                                 "its output directory is needed (--start-dir)")
+            state, start["rows"] = run_files.take_over(spec["start_from"], start_dir, Path(out_dir) / run_files.WORK,
+                                                       spec["save_fields"])
+            start["state"] = {key: state[key] for key in run_files.FIELD_KEYS}
+            log.info("%s starts from %s's increment %d", spec["name"], spec["start_from"]["run"], start["increment"])
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
     # the increments taken over count in the run's cost (studies compare whole runs)
