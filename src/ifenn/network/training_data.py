@@ -24,7 +24,7 @@ def extract_training_data(fields_path: str | Path, increments: list[int], out_pa
         out.attrs.update({k: attrs[k] for k in run_files.GRID_ATTRS})
         out.attrs["run"] = attrs["run"]
         for key in run_files.MAP_KEYS:
-            out.create_dataset(key, data=np.stack([s[key] for s in states]), compression="gzip")
+            out.create_dataset(key, data=np.stack([s[key] for s in states]), **run_files.COMPRESSION)
         out["increment"] = np.array(increments)
         out["u"] = np.array([s["u"] for s in states])
 
