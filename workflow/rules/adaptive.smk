@@ -7,6 +7,7 @@ rule adaptive_spec:
         "results/adaptive/{run}/spec.json",
     params:
         spec=lambda w: run_spec_json("adaptive", w.run),
+    priority: 100  # instant; unlocks its run, whose own priority counts only once it is ready (fem.smk)
     log:
         "logs/adaptive/{run}_spec.log",
     benchmark:

@@ -8,6 +8,7 @@ rule ifenn_spec:
         "results/ifenn/{run}/spec.json",
     params:
         spec=lambda w: json.dumps(ifenn_run_spec(config, w.run), sort_keys=True),
+    priority: 100  # instant; unlocks its run, whose own priority counts only once it is ready (fem.smk)
     log:
         "logs/ifenn/{run}_spec.log",
     benchmark:

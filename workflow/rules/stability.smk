@@ -7,6 +7,7 @@ rule stability_cell_spec:
         "results/stability/{cell}/spec.json",
     params:
         spec=lambda w: json.dumps(STABILITY_CELLS[w.cell]["spec"], sort_keys=True),
+    priority: 100  # instant; unlocks its run, whose own priority counts only once it is ready (fem.smk)
     wildcard_constraints:
         cell="(fem|ifenn)_[A-Za-z0-9_.+-]+",
     log:
