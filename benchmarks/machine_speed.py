@@ -7,12 +7,20 @@ measured on different days compare only after scaling by this number. Run it bef
 the paper DAG and quote it beside the DAG's time. Reference values: 0.14 s (2026-12-06, the
 machine of the eighteenth session's 66.5-minute DAG), 0.37 s (the twentieth session's).
 
-    .venv/bin/python benchmarks/machine_speed.py [--repeat N]
+A DAG runs two jobs at once, and two jobs on a machine's two "cores" may slow each other (shared
+caches and memory bandwidth, or two hyperthreads of one core): ``--copies 2`` runs the measurement
+in two processes at once and prints both, which says how a machine serves the DAG's condition.
+The twenty-first session's machine: 0.186 s alone, where its paper DAG's jobs ran ~2x slower
+than the eighteenth's, not 1.3x.
+
+    .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2]
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -26,7 +34,15 @@ from ifenn.config import REPO, fem_run_spec, load_config
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeat", type=int, default=5, help="solves timed after a first one (default 5)")
+    parser.add_argument("--copies", type=int, default=1, help="processes measuring at once, one core each (default 1)")
     args = parser.parse_args()
+    if args.copies > 1:
+        command = [sys.executable, __file__, "--repeat", str(args.repeat)]
+        copies = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for _ in range(args.copies)]
+        medians = [float(copy.communicate()[0].split("median ")[1].split(" s")[0]) for copy in copies]
+        print(f"{args.copies} copies at once, one core each: medians {', '.join(f'{m:.3f}' for m in medians)} s "
+              "(run with --copies 1 for the machine alone)")
+        return 0
     import dolfinx.fem.petsc as fem_petsc
 
     from ifenn.fem.mesh import build_mesh, read_dolfinx_mesh, write_mesh

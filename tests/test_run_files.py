@@ -130,6 +130,45 @@ def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     assert list(jobs.job) == ["fem/b", "fem/a", "ifenn/c"] and list(jobs.wall_s) == [300.0, 100.0, 50.0]
 
 
+def test_the_longest_chain_of_jobs_that_wait_for_each_other():
+    """critical_path: a job waits for the jobs that write its inputs; the chain with the largest
+    summed wall time bounds the workflow on any number of cores, and the bound says so."""
+    from ifenn.studies.stage_times import critical_path, parse_dry_run, wall_bound
+
+    dry = """
+rule mesh:
+    output: results/mesh.xdmf
+    jobid: 3
+    benchmark: benchmarks/mesh/m.tsv
+rule fem:
+    input: results/spec_a.json, results/mesh.xdmf
+    output: results/fem/a/history.csv, results/fem/a/fields.h5
+    benchmark: benchmarks/fem/a.tsv
+rule fem:
+    input: results/spec_b.json, results/mesh.xdmf, results/fem/a/fields.h5
+    output: results/fem/b/history.csv
+    benchmark: benchmarks/fem/b.tsv
+rule ifenn:
+    input: results/mesh.xdmf, results/fem/a/fields.h5
+    output: results/ifenn/c/history.csv
+    benchmark: benchmarks/ifenn/c.tsv
+localrule all:
+    input: results/fem/b/history.csv, results/ifenn/c/history.csv
+    jobid: 0
+"""
+    jobs = parse_dry_run(dry)
+    assert [job["rule"] for job in jobs] == ["mesh", "fem", "fem", "ifenn", "all"]
+    assert jobs[2]["input"][2] == "results/fem/a/fields.h5" and jobs[4]["benchmark"] is None
+    wall = {"benchmarks/mesh/m.tsv": 1.0, "benchmarks/fem/a.tsv": 100.0, "benchmarks/fem/b.tsv": 50.0, "benchmarks/ifenn/c.tsv": 120.0}
+    assert critical_path(jobs, wall) == (221.0, ["benchmarks/mesh/m.tsv", "benchmarks/fem/a.tsv", "benchmarks/ifenn/c.tsv"])
+    wall["benchmarks/fem/b.tsv"] = 130.0
+    assert critical_path(jobs, wall)[0] == 231.0
+    assert critical_path([], wall) == (0.0, [])
+    import pandas as pd
+    table = pd.DataFrame([{"stage": "total", "wall_s": 401.0, "longest_s": 130.0}])
+    assert wall_bound(table, 2) == 200.5 and wall_bound(table, 2, critical_s=231.0) == 231.0
+
+
 def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):
     """Against the DAG's own list: files no job writes are stale (left out of the sums, by
     ``keep``), the DAG's files not written yet are missing (a run not finished)."""

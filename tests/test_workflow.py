@@ -200,6 +200,11 @@ def test_stage_times_count_only_the_current_dag(quick_workflow):
                                 str(REPO / "config" / "quick.yaml")], env=ENV, capture_output=True, text=True, timeout=600)
         assert shown.returncode == 0 and "left out: 1 benchmark files" in shown.stdout and "a-run-since-dropped" in shown.stdout
         assert "not run yet" not in shown.stdout and "the 3 longest jobs" in shown.stdout
+        # the longest chain of jobs that wait for each other: at least the longest job, at most all jobs
+        chain = re.search(r"the longest chain: ([\d.]+) min: (.+)", shown.stdout)
+        assert chain and " -> " in chain.group(2), shown.stdout
+        total = counted.loc["total"]
+        assert total.longest_s - 3 <= 60 * float(chain.group(1)) <= total.wall_s + 3
     finally:
         stale.unlink()
 

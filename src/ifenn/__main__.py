@@ -76,14 +76,15 @@ def main(argv=None) -> int:
     times.add_argument("--top", type=int, default=0, help="also list the N longest jobs")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import dag_benchmarks, job_times, stage_times, unmatched, wall_bound
+        from ifenn.studies.stage_times import critical_path, dag_jobs, job_times, stage_times, unmatched, wall_bound
 
         def some(paths):
             return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
 
-        keep = None
+        keep, dag = None, None
         if not args.every_file:
-            keep = dag_benchmarks(args.workdir, args.snakefile, args.configfile)
+            dag = dag_jobs(args.workdir, args.snakefile, args.configfile)
+            keep = {job["benchmark"] for job in dag if job["benchmark"]}
             stale, missing = unmatched(args.workdir, keep)
             if stale:
                 print(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({some(stale)})\n")
@@ -92,10 +93,19 @@ def main(argv=None) -> int:
                       "the sums below count less than `snakemake all` spends\n")
         table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
-        print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores) / 60:.1f} min (summed wall / cores, or the longest job)")
+        jobs = job_times(args.workdir, keep)
+        chain_s, chain = 0.0, []
+        if dag is not None:
+            wall = {f"benchmarks/{job}.tsv": seconds for job, seconds in zip(jobs.job, jobs.wall_s, strict=True)}
+            chain_s, chain = critical_path(dag, wall)
+        print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores, chain_s) / 60:.1f} min "
+              "(summed wall / cores, the longest job, or the longest chain of jobs that wait for each other)")
+        if chain:
+            steps = [f"{path.removeprefix('benchmarks/').removesuffix('.tsv')} {wall.get(path, 0.0):.0f} s"
+                     for path in chain if wall.get(path, 0.0) >= 1.0]
+            print(f"the longest chain: {chain_s / 60:.1f} min: " + " -> ".join(steps))
         if args.top:
-            jobs = job_times(args.workdir, keep).head(args.top)
-            print(f"\nthe {len(jobs)} longest jobs:\n" + jobs[["job", "wall_s", "cpu_s"]].round(1).to_markdown(index=False))
+            print(f"\nthe {min(args.top, len(jobs))} longest jobs:\n" + jobs.head(args.top)[["job", "wall_s", "cpu_s"]].round(1).to_markdown(index=False))
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):

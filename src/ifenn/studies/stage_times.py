@@ -21,18 +21,74 @@ from pathlib import Path
 import pandas as pd
 
 
-def dag_benchmarks(workdir: str | Path, snakefile: str | Path, configfiles: list[str] | None = None,
-                   target: str = "all") -> set[str]:
-    """The benchmark files (relative to ``workdir``) that the jobs of ``target`` write, from
-    Snakemake's dry run with every job forced (nothing is run or touched); ``configfiles`` as the
-    workflow was run with (none: the Snakefile's own config)."""
+def dag_jobs(workdir: str | Path, snakefile: str | Path, configfiles: list[str] | None = None,
+             target: str = "all") -> list[dict]:
+    """The jobs of ``target`` from Snakemake's dry run with every job forced (nothing is run or
+    touched): :func:`parse_dry_run` of its output; ``configfiles`` as the workflow was run with
+    (none: the Snakefile's own config)."""
     # the target before --configfile, which takes every word after it
     command = [sys.executable, "-m", "snakemake", target, "-s", str(snakefile), "--directory", str(workdir), "-n",
                "--forceall", "--cores", "1", *(["--configfile", *map(str, configfiles)] if configfiles else [])]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"snakemake's dry run of {target} failed:\n{(done.stdout + done.stderr)[-2000:]}")
-    return set(re.findall(r"^\s*benchmark: (\S+)$", done.stdout + done.stderr, flags=re.M))
+    return parse_dry_run(done.stdout + done.stderr)
+
+
+def parse_dry_run(text: str) -> list[dict]:
+    """One dict per job of a Snakemake dry run's output: ``rule``, ``input`` and ``output`` (lists
+    of paths relative to the working directory) and ``benchmark`` (its file, or None)."""
+    jobs = []
+    for line in text.splitlines():
+        if match := re.match(r"(?:local)?rule (\w+):$", line):
+            jobs.append({"rule": match.group(1), "input": [], "output": [], "benchmark": None})
+        elif jobs and (match := re.match(r"\s+(input|output|benchmark): (.+)$", line)):
+            key, value = match.groups()
+            jobs[-1][key] = value.strip() if key == "benchmark" else [item.strip() for item in value.split(",")]
+    return jobs
+
+
+def dag_benchmarks(workdir: str | Path, snakefile: str | Path, configfiles: list[str] | None = None,
+                   target: str = "all") -> set[str]:
+    """The benchmark files (relative to ``workdir``) that the jobs of ``target`` write
+    (:func:`dag_jobs`)."""
+    return {job["benchmark"] for job in dag_jobs(workdir, snakefile, configfiles, target) if job["benchmark"]}
+
+
+def critical_path(jobs: list[dict], wall_s: dict[str, float]) -> tuple[float, list[str]]:
+    """The longest chain of jobs that wait for each other (a job waits for the jobs that write its
+    inputs), by their measured wall seconds (``wall_s``: benchmark file -> seconds; a job without
+    one counts 0): (seconds, the chain's benchmark files in order). No number of cores runs the
+    workflow in less."""
+    producer = {path: index for index, job in enumerate(jobs) for path in job["output"]}
+    longest: dict[int, tuple[float, int | None]] = {}
+
+    def finish(index: int) -> float:
+        # iterative depth-first: the longest chain ending with job `index` (the DAG has no cycles)
+        stack = [index]
+        while stack:
+            top = stack[-1]
+            before = {producer[path] for path in jobs[top]["input"] if path in producer} - {top}
+            pending = [other for other in before if other not in longest]
+            if pending:
+                stack.extend(pending)
+                continue
+            stack.pop()
+            if top in longest:
+                continue
+            start, previous = max(((longest[other][0], other) for other in before), default=(0.0, None))
+            longest[top] = (start + wall_s.get(jobs[top]["benchmark"] or "", 0.0), previous)
+        return longest[index][0]
+
+    if not jobs:
+        return 0.0, []
+    end = max(range(len(jobs)), key=finish)
+    chain, index = [], end
+    while index is not None:
+        if jobs[index]["benchmark"]:
+            chain.append(jobs[index]["benchmark"])
+        index = longest[index][1]
+    return longest[end][0], chain[::-1]
 
 
 def job_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
@@ -77,9 +133,9 @@ def unmatched(workdir: str | Path, keep: set[str]) -> tuple[list[str], list[str]
     return sorted(present - keep), sorted(keep - present)
 
 
-def wall_bound(table: pd.DataFrame, cores: int) -> float:
+def wall_bound(table: pd.DataFrame, cores: int, critical_s: float = 0.0) -> float:
     """A lower bound of the workflow's wall time on ``cores`` cores, seconds: the jobs' summed wall
-    time shared perfectly, or the longest job, whichever is larger (every job here uses one core;
-    dependencies can only lengthen it)."""
+    time shared perfectly, the longest job, or the longest chain of jobs that wait for each other
+    (``critical_s``, :func:`critical_path`), whichever is largest (every job here uses one core)."""
     total = table[table.stage == "total"].iloc[0]
-    return max(float(total.wall_s) / cores, float(total.longest_s))
+    return max(float(total.wall_s) / cores, float(total.longest_s), float(critical_s))
