@@ -10,8 +10,10 @@ machine of the eighteenth session's 66.5-minute DAG), 0.37 s (the twentieth sess
 A DAG runs two jobs at once, and two jobs on a machine's two "cores" may slow each other (shared
 caches and memory bandwidth, or two hyperthreads of one core): ``--copies 2`` runs the measurement
 in two processes at once and prints both, which says how a machine serves the DAG's condition.
-The twenty-first session's machine: 0.186 s alone, where its paper DAG's jobs ran ~2x slower
-than the eighteenth's, not 1.3x.
+The second number, one apply of the default preset's kept block Cholesky factor (memory-bound
+triangular solves), is the better unit for the FEM and IFENN runs: the twenty-first session's
+machine factored 1.3x slower than the eighteenth's (0.186 s) but its paper DAG's snt3-II pair
+took 2.4x as long (1,314 s against 546 s).
 
     .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2]
 """
@@ -39,9 +41,11 @@ def main() -> int:
     if args.copies > 1:
         command = [sys.executable, __file__, "--repeat", str(args.repeat)]
         copies = [subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for _ in range(args.copies)]
-        medians = [float(copy.communicate()[0].split("median ")[1].split(" s")[0]) for copy in copies]
-        print(f"{args.copies} copies at once, one core each: medians {', '.join(f'{m:.3f}' for m in medians)} s "
-              "(run with --copies 1 for the machine alone)")
+        outputs = [copy.communicate()[0] for copy in copies]
+        solves = [float(out.split("median ")[1].split(" s")[0]) for out in outputs]
+        applies = [float(out.split("apply median ")[1].split(" ms")[0]) for out in outputs]
+        print(f"{args.copies} copies at once, one core each: MUMPS factor + solve {', '.join(f'{m:.3f}' for m in solves)} s, "
+              f"kept-factor apply {', '.join(f'{m:.1f}' for m in applies)} ms (run with --copies 1 for the machine alone)")
         return 0
     import dolfinx.fem.petsc as fem_petsc
 
@@ -74,6 +78,21 @@ def main() -> int:
     print(f"snt1 displacement matrix ({A.getSize()[0]:,} dofs), MUMPS Cholesky factor + solve, one core: "
           f"median {np.median(seconds[1:]):.3f} s over {args.repeat} (first, with the analysis: {seconds[0]:.3f} s); "
           "the eighteenth session's machine: 0.14 s")
+    # the unit of the default preset (cholesky-reuse): one apply of the kept block Cholesky factor,
+    # a CG iteration's preconditioner (memory-bound triangular solves)
+    from ifenn.fem.factor import NestedDissectionCholesky
+
+    baij = A.convert(PETSc.Mat.Type.BAIJ)
+    pc = PETSc.PC().createPython(NestedDissectionCholesky(), PETSc.COMM_SELF)
+    pc.setOperators(baij)
+    pc.setUp()
+    applies = []
+    for _ in range(20 * args.repeat):
+        started = time.perf_counter()
+        pc.apply(b, x)
+        applies.append(time.perf_counter() - started)
+    print(f"the kept block Cholesky factor (cholesky-reuse) of the same matrix: one apply median {1e3 * np.median(applies):.1f} ms "
+          "(the eighteenth session's machine: 6.9 ms)")
     return 0
 
 
