@@ -12,7 +12,8 @@ caches and memory bandwidth, or two hyperthreads of one core): ``--copies 2`` ru
 in two processes at once and prints both, which says how a machine serves the DAG's condition.
 The second number, one apply of the default preset's kept block Cholesky factor (memory-bound
 triangular solves), is the better unit for the FEM and IFENN runs: the twenty-first session's
-machine factored 1.3x slower than the eighteenth's (0.186 s) but its paper DAG's snt3-II pair
+machine, alone, factored 1.4x slower than the eighteenth's (0.191 s) and applied 3.8x slower
+(25.9 ms against 6.9 ms; two copies at once 29.0 / 26.5 ms), and its paper DAG's snt3-II pair
 took 2.4x as long (1,314 s against 546 s).
 
     .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2]
