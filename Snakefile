@@ -7,6 +7,11 @@ from snakemake.utils import min_version
 
 min_version("9.0")
 
+# one pending scheduler wake-up at a time (Snakemake 9's timers multiply; ifenn/snakemake_patch.py)
+from ifenn import snakemake_patch
+
+snakemake_patch.apply()
+
 
 configfile: os.path.join(workflow.basedir, "config", "config.yaml")
 

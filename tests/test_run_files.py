@@ -180,3 +180,30 @@ def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):
     keep = {"benchmarks/fem/a.tsv", "benchmarks/ifenn/b.tsv"}
     assert unmatched(tmp_path, keep) == (["benchmarks/fem/old.tsv"], ["benchmarks/ifenn/b.tsv"])
     assert stage_times(tmp_path, keep).set_index("stage").loc["total", "wall_s"] == 100.0
+
+
+def test_the_snakemake_scheduler_keeps_one_wakeup_pending():
+    """ifenn.snakemake_patch: the scheduler's re-evaluation timers no longer multiply; asked for
+    many wake-ups while one is pending, the scheduler is woken once, and again after that one."""
+    import threading
+    import time
+
+    from snakemake.scheduling.job_scheduler import JobScheduler
+
+    from ifenn import snakemake_patch
+
+    assert snakemake_patch.apply() and JobScheduler._schedule_reevalutation is snakemake_patch._reevaluate_once
+
+    class Scheduler:
+        _open_jobs = threading.Semaphore(0)
+
+    scheduler = Scheduler()
+    for _ in range(50):
+        JobScheduler._schedule_reevalutation(scheduler, 0.05)
+    time.sleep(0.3)
+    woken = 0
+    while scheduler._open_jobs.acquire(blocking=False):
+        woken += 1
+    assert woken == 1
+    JobScheduler._schedule_reevalutation(scheduler, 0.05)
+    assert scheduler._open_jobs.acquire(timeout=2)
