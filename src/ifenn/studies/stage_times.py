@@ -16,6 +16,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+from graphlib import TopologicalSorter
 from pathlib import Path
 
 import pandas as pd
@@ -61,28 +62,15 @@ def critical_path(jobs: list[dict], wall_s: dict[str, float]) -> tuple[float, li
     one counts 0): (seconds, the chain's benchmark files in order). No number of cores runs the
     workflow in less."""
     producer = {path: index for index, job in enumerate(jobs) for path in job["output"]}
-    longest: dict[int, tuple[float, int | None]] = {}
-
-    def finish(index: int) -> float:
-        # iterative depth-first: the longest chain ending with job `index` (the DAG has no cycles)
-        stack = [index]
-        while stack:
-            top = stack[-1]
-            before = {producer[path] for path in jobs[top]["input"] if path in producer} - {top}
-            pending = [other for other in before if other not in longest]
-            if pending:
-                stack.extend(pending)
-                continue
-            stack.pop()
-            if top in longest:
-                continue
-            start, previous = max(((longest[other][0], other) for other in before), default=(0.0, None))
-            longest[top] = (start + wall_s.get(jobs[top]["benchmark"] or "", 0.0), previous)
-        return longest[index][0]
-
-    if not jobs:
+    waits_for = {index: {producer[path] for path in job["input"] if path in producer} - {index}
+                 for index, job in enumerate(jobs)}
+    longest: dict[int, tuple[float, int | None]] = {}   # job -> (its chain's end time, the job before)
+    for index in TopologicalSorter(waits_for).static_order():
+        start, previous = max(((longest[other][0], other) for other in waits_for[index]), default=(0.0, None))
+        longest[index] = (start + wall_s.get(jobs[index]["benchmark"] or "", 0.0), previous)
+    if not longest:
         return 0.0, []
-    end = max(range(len(jobs)), key=finish)
+    end = max(longest, key=lambda index: longest[index][0])
     chain, index = [], end
     while index is not None:
         if jobs[index]["benchmark"]:
