@@ -130,6 +130,17 @@ def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     assert list(jobs.job) == ["fem/b", "fem/a", "ifenn/c"] and list(jobs.wall_s) == [300.0, 100.0, 50.0]
 
 
+def test_the_cpu_column_misses_at_most_the_time_since_the_last_sample():
+    """Snakemake samples a job's CPU every 0.5 s for 15 s, then every 30 s, and keeps the last
+    sample: a 10-s job misses at most 0.5 s, a 20-s job the 5 s since its 15-s sample, a long one
+    a whole 30-s interval."""
+    from ifenn.studies.stage_times import cpu_unsampled_bound
+
+    assert cpu_unsampled_bound([0.2]) == 0.2 and cpu_unsampled_bound([10.0]) == 0.5
+    assert cpu_unsampled_bound([20.0]) == 5.0 and cpu_unsampled_bound([1000.0]) == 30.0
+    assert cpu_unsampled_bound([10.0, 20.0, 1000.0]) == 35.5 and cpu_unsampled_bound([]) == 0.0
+
+
 def test_the_longest_chain_of_jobs_that_wait_for_each_other():
     """critical_path: a job waits for the jobs that write its inputs; the chain with the largest
     summed wall time bounds the workflow on any number of cores, and the bound says so."""

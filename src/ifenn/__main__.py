@@ -76,7 +76,15 @@ def main(argv=None) -> int:
     times.add_argument("--top", type=int, default=0, help="also list the N longest jobs")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import critical_path, dag_jobs, job_times, stage_times, unmatched, wall_bound
+        from ifenn.studies.stage_times import (
+            cpu_unsampled_bound,
+            critical_path,
+            dag_jobs,
+            job_times,
+            stage_times,
+            unmatched,
+            wall_bound,
+        )
 
         def some(paths):
             return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
@@ -94,6 +102,8 @@ def main(argv=None) -> int:
         table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
         jobs = job_times(args.workdir, keep)
+        print(f"\ncpu_s is Snakemake's last sample of each job's CPU time (every 0.5 s for 15 s, then every 30 s): "
+              f"it leaves out at most {cpu_unsampled_bound(jobs.wall_s):.0f} s here; wall_s is exact")
         chain_s, chain = 0.0, []
         if dag is not None:
             wall = {f"benchmarks/{job}.tsv": seconds for job, seconds in zip(jobs.job, jobs.wall_s, strict=True)}

@@ -5,6 +5,13 @@ Every rule writes ``benchmarks/<stage>/<job>.tsv`` (Snakemake's format: a header
 the folder under ``benchmarks/`` (fem, ifenn, figures, tables, stability, ...), so the table says
 where the CPU time of `snakemake all` goes and what the two cores can at best bring it down to.
 
+Snakemake measures a job's wall time exactly but its CPU time by sampling the process tree
+(snakemake/benchmark.py: every 0.5 s for the first 30 samples, then every 30 s) and keeps the last
+sample, so ``cpu_time`` misses the CPU a job spent after its last sample: up to 30 s a job
+(measured: a job that burnt 40.0 CPU-s recorded 33.0). ``cpu_unsampled_bound`` bounds what the
+summed CPU column misses; on two quiet cores the summed wall minus the summed CPU of the paper
+DAG is of that size, so it is no idle time.
+
 A working directory keeps the benchmark files of jobs an older workflow had (a run since
 dropped from the config, a reference now computed another way): ``dag_benchmarks`` asks Snakemake
 (a dry run of the target with every job forced) which benchmark files the current DAG writes, and
@@ -98,9 +105,26 @@ def job_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame
     return pd.DataFrame(rows).sort_values("wall_s", ascending=False, kind="stable").reset_index(drop=True)
 
 
+#: Snakemake's CPU sampling (snakemake/benchmark.py: BENCHMARK_INTERVAL_SHORT for the first
+#: 30 samples, then BENCHMARK_INTERVAL), seconds
+SAMPLE_SHORT_S, SAMPLES_SHORT, SAMPLE_S = 0.5, 30, 30.0
+
+
+def cpu_unsampled_bound(wall_s) -> float:
+    """At most how many CPU seconds the benchmark files' ``cpu_time`` leaves out, summed over jobs
+    of these wall times (seconds): a job's CPU after its last sample, on one core at most the wall
+    time since that sample: one short interval while the short samples last, then up to one long
+    interval (module doc)."""
+    short_s = SAMPLE_SHORT_S * SAMPLES_SHORT
+    wall = pd.Series(wall_s, dtype=float)
+    return float(wall.where(wall <= short_s, 0.0).clip(upper=SAMPLE_SHORT_S).sum()
+                 + (wall[wall > short_s] - short_s).clip(upper=SAMPLE_S).sum())
+
+
 def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
     """One row per stage: ``stage, jobs, wall_s`` (sum of the jobs' wall seconds),
-    ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it),
+    ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it; a
+    lower bound, :func:`cpu_unsampled_bound`),
     largest first, and a last row ``total``. ``keep``: count only these benchmark files (paths
     relative to ``workdir``, as ``dag_benchmarks`` gives them); None counts every file."""
     jobs = job_times(workdir, keep)
