@@ -16,12 +16,18 @@ machine, alone, factored 1.4x slower than the eighteenth's (0.191 s) and applied
 (25.9 ms against 6.9 ms; two copies at once 29.0 / 26.5 ms), and its paper DAG's snt3-II pair
 took 2.4x as long (1,314 s against 546 s).
 
-    .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2]
+    .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2] [--out results/benchmarks/machine_speed.json]
+
+The workflow runs it alone at the start of every DAG (rule machine_speed, ``--out``), so a DAG's
+benchmark files come with the machine they were measured on; ``python -m ifenn stage-times``
+prints the two numbers beside the sums (:data:`REFERENCE`: the eighteenth session's machine).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import platform
 import subprocess
 import sys
 import tempfile
@@ -32,12 +38,17 @@ import numpy as np
 from petsc4py import PETSc
 
 from ifenn.config import REPO, fem_run_spec, load_config
+from ifenn.io import atomic_path
+
+#: the machine of the eighteenth session, whose paper DAG took 66.5 min on 2 cores
+REFERENCE = {"mumps_factor_solve_s": 0.14, "kept_factor_apply_ms": 6.9}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--repeat", type=int, default=5, help="solves timed after a first one (default 5)")
     parser.add_argument("--copies", type=int, default=1, help="processes measuring at once, one core each (default 1)")
+    parser.add_argument("--out", default=None, help="also write the two numbers here (JSON)")
     args = parser.parse_args()
     if args.copies > 1:
         command = [sys.executable, __file__, "--repeat", str(args.repeat)]
@@ -94,6 +105,14 @@ def main() -> int:
         applies.append(time.perf_counter() - started)
     print(f"the kept block Cholesky factor (cholesky-reuse) of the same matrix: one apply median {1e3 * np.median(applies):.1f} ms "
           "(the eighteenth session's machine: 6.9 ms)")
+    if args.out:
+        record = {"mumps_factor_solve_s": round(float(np.median(seconds[1:])), 4),
+                  "kept_factor_apply_ms": round(1e3 * float(np.median(applies)), 2), "dofs": A.getSize()[0],
+                  "repeat": args.repeat, "host": platform.node(), "machine": platform.machine(),
+                  "reference": {**REFERENCE, "what": "the eighteenth session's machine (its paper DAG: 66.5 min on 2 cores)"}}
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(args.out) as tmp:
+            Path(tmp).write_text(json.dumps(record, indent=1) + "\n")
     return 0
 
 

@@ -141,6 +141,21 @@ def test_the_cpu_column_misses_at_most_the_time_since_the_last_sample():
     assert cpu_unsampled_bound([10.0, 20.0, 1000.0]) == 35.5 and cpu_unsampled_bound([]) == 0.0
 
 
+def test_stage_times_name_the_machine_the_dag_ran_on(tmp_path):
+    """The workflow's first job records the machine's speed (benchmarks/machine_speed.py --out);
+    stage-times quotes it beside the reference machine's, and says when a DAG has none."""
+    import json
+
+    from ifenn.studies.stage_times import MACHINE_SPEED, machine_speed_line
+
+    assert machine_speed_line(tmp_path) is None
+    (tmp_path / MACHINE_SPEED).parent.mkdir(parents=True)
+    (tmp_path / MACHINE_SPEED).write_text(json.dumps({"mumps_factor_solve_s": 0.1985, "kept_factor_apply_ms": 26.31,
+                                                      "reference": {"mumps_factor_solve_s": 0.14, "kept_factor_apply_ms": 6.9}}))
+    line = machine_speed_line(tmp_path)
+    assert "0.199 s" in line and "26.3 ms" in line and "0.14 s" in line and "6.9 ms" in line
+
+
 def test_the_longest_chain_of_jobs_that_wait_for_each_other():
     """critical_path: a job waits for the jobs that write its inputs; the chain with the largest
     summed wall time bounds the workflow on any number of cores, and the bound says so."""

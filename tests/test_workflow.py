@@ -200,6 +200,8 @@ def test_stage_times_count_only_the_current_dag(quick_workflow):
                                 str(REPO / "config" / "quick.yaml")], env=ENV, capture_output=True, text=True, timeout=600)
         assert shown.returncode == 0 and "left out: 1 benchmark files" in shown.stdout and "a-run-since-dropped" in shown.stdout
         assert "not run yet" not in shown.stdout and "the 3 longest jobs" in shown.stdout
+        # the DAG's first job measured the machine, and stage-times quotes it
+        assert "one apply of its kept Cholesky factor" in shown.stdout, shown.stdout
         # the longest chain of jobs that wait for each other: at least the longest job, at most all jobs
         chain = re.search(r"the longest chain: ([\d.]+) min: (.+)", shown.stdout)
         assert chain and " -> " in chain.group(2), shown.stdout

@@ -77,10 +77,12 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.command == "stage-times":
         from ifenn.studies.stage_times import (
+            MACHINE_SPEED,
             cpu_unsampled_bound,
             critical_path,
             dag_jobs,
             job_times,
+            machine_speed_line,
             stage_times,
             unmatched,
             wall_bound,
@@ -104,6 +106,8 @@ def main(argv=None) -> int:
         jobs = job_times(args.workdir, keep)
         print(f"\ncpu_s is Snakemake's last sample of each job's CPU time (every 0.5 s for 15 s, then every 30 s): "
               f"it leaves out at most {cpu_unsampled_bound(jobs.wall_s):.0f} s here; wall_s is exact")
+        machine = machine_speed_line(args.workdir)
+        print(machine or f"the machine: not measured ({MACHINE_SPEED} is written by the workflow's first job)")
         chain_s, chain = 0.0, []
         if dag is not None:
             wall = {f"benchmarks/{job}.tsv": seconds for job, seconds in zip(jobs.job, jobs.wall_s, strict=True)}

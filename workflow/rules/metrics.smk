@@ -76,6 +76,26 @@ rule speed_accuracy:
         "../scripts/speed_accuracy.py"
 
 
+rule machine_speed:
+    """The machine the DAG's benchmark files were measured on (benchmarks/machine_speed.py): alone,
+    first (every core, the highest priority), ~10 s; stage-times prints it beside the sums."""
+    output:
+        "results/benchmarks/machine_speed.json",
+    params:
+        python=PYTHON,
+        script=os.path.join(workflow.basedir, "benchmarks", "machine_speed.py"),
+    threads: all_cores
+    priority: 200
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/benchmarks/machine_speed.log",
+    benchmark:
+        "benchmarks/machine/machine_speed.tsv"
+    shell:
+        "OMP_NUM_THREADS=1 {params.python} {params.script} --out {output} > {log} 2>&1"
+
+
 rule phase_field_benchmark:
     input:
         ifenn_specs=lambda w: [f"results/ifenn/{r}/spec.json" for r in config["phase_field_benchmark"]["runs"]],

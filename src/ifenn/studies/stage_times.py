@@ -121,6 +121,27 @@ def cpu_unsampled_bound(wall_s) -> float:
                  + (wall[wall > short_s] - short_s).clip(upper=SAMPLE_S).sum())
 
 
+#: where the workflow's rule machine_speed writes benchmarks/machine_speed.py's numbers
+MACHINE_SPEED = Path("results") / "benchmarks" / "machine_speed.json"
+
+
+def machine_speed_line(workdir: str | Path) -> str | None:
+    """One line naming the machine a DAG ran on (its rule machine_speed's record), against the
+    reference machine's numbers; None if the DAG has not measured it."""
+    import json
+
+    path = Path(workdir) / MACHINE_SPEED
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    reference = record.get("reference", {})
+    return (f"the machine ({MACHINE_SPEED}, measured alone at the DAG's start): MUMPS factor + solve of snt1's matrix "
+            f"{record['mumps_factor_solve_s']:.3f} s, one apply of its kept Cholesky factor {record['kept_factor_apply_ms']:.1f} ms; "
+            f"the reference machine {reference.get('mumps_factor_solve_s', float('nan')):.2f} s, "
+            f"{reference.get('kept_factor_apply_ms', float('nan')):.1f} ms (its paper DAG: 66.5 min): scale the seconds above "
+            f"before comparing them with another machine's")
+
+
 def stage_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame:
     """One row per stage: ``stage, jobs, wall_s`` (sum of the jobs' wall seconds),
     ``longest_s``, ``longest_job``, ``cpu_s`` (sum of cpu_time, where Snakemake measured it; a
