@@ -10,6 +10,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from ifenn.studies.stage_times import parse_dry_run
+
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
 ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
@@ -127,19 +129,6 @@ def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_wor
     assert not rules & {"fem", "fem_spec", "mesh", "train_picnn", "training_data"}, text
 
 
-def _dry_jobs(dry) -> list[dict]:
-    """The jobs of a dry run's output: rule, priority (0 where none is printed) and wildcards."""
-    jobs = []
-    for line in (dry.stdout + dry.stderr).splitlines():
-        if match := re.match(r"(?:local)?rule (\w+):", line):
-            jobs.append({"rule": match.group(1), "priority": 0})
-        elif jobs and (match := re.match(r"\s+priority: (\d+)", line)):
-            jobs[-1]["priority"] = int(match.group(1))
-        elif jobs and (match := re.match(r"\s+wildcards: (.*)", line)):
-            jobs[-1].update(item.split("=", 1) for item in match.group(1).split(", "))
-    return jobs
-
-
 def test_instant_jobs_that_unlock_runs_come_first(tmp_path):
     """The paper DAG: every spec job (instant) has the top priority, so a run whose own priority
     is high (a long chain behind it) is not held back behind long jobs by its spec; a run that
@@ -147,7 +136,7 @@ def test_instant_jobs_that_unlock_runs_come_first(tmp_path):
     snt1-II pair's spec ran 47 min after the network it waited for, FEM snt1-III behind the pair."""
     dry = _snakemake("--directory", str(tmp_path), "-n", "--forceall", "--cores", "2", "all", cwd=tmp_path)
     assert dry.returncode == 0, dry.stderr[-3000:]
-    jobs = _dry_jobs(dry)
+    jobs = parse_dry_run(dry.stdout + dry.stderr)
     specs = [job for job in jobs if job["rule"].endswith("_spec")]
     assert {job["rule"] for job in specs} >= {"fem_spec", "ifenn_spec", "adaptive_spec", "stability_cell_spec"}
     assert all(job["priority"] == 100 for job in specs), [job for job in specs if job["priority"] != 100][:3]
@@ -164,7 +153,7 @@ def test_adaptive_finer_references_replace_the_uniform_ones(tmp_path):
     dry = _snakemake("--directory", str(tmp_path), "--configfile", str(REPO / "config" / "quick.yaml"), str(override),
                      "-n", "--cores", "1", "all", cwd=tmp_path)
     assert dry.returncode == 0, dry.stderr[-3000:]
-    jobs = {(job["rule"], job["run"]) for job in _dry_jobs(dry) if "run" in job}
+    jobs = {(job["rule"], job["wildcards"]["run"]) for job in parse_dry_run(dry.stdout + dry.stderr) if "run" in job["wildcards"]}
     runs = {run for rule, run in jobs if rule == "fem"}
     adaptive = {run for rule, run in jobs if rule == "adaptive"}
     fines = {"snt1-II-fine", "snt1-III-fine", "sdnt-fine", "adnt-fine", "snt-shear-fine"}

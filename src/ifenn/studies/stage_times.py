@@ -45,14 +45,22 @@ def dag_jobs(workdir: str | Path, snakefile: str | Path, configfiles: list[str] 
 
 def parse_dry_run(text: str) -> list[dict]:
     """One dict per job of a Snakemake dry run's output: ``rule``, ``input`` and ``output`` (lists
-    of paths relative to the working directory) and ``benchmark`` (its file, or None)."""
+    of paths relative to the working directory), ``benchmark`` (its file, or None), ``priority``
+    (0 where none is printed) and ``wildcards`` (name -> value)."""
     jobs = []
     for line in text.splitlines():
         if match := re.match(r"(?:local)?rule (\w+):$", line):
-            jobs.append({"rule": match.group(1), "input": [], "output": [], "benchmark": None})
-        elif jobs and (match := re.match(r"\s+(input|output|benchmark): (.+)$", line)):
+            jobs.append({"rule": match.group(1), "input": [], "output": [], "benchmark": None, "priority": 0, "wildcards": {}})
+        elif jobs and (match := re.match(r"\s+(input|output|benchmark|priority|wildcards): (.+)$", line)):
             key, value = match.groups()
-            jobs[-1][key] = value.strip() if key == "benchmark" else [item.strip() for item in value.split(",")]
+            if key == "benchmark":
+                jobs[-1][key] = value.strip()
+            elif key == "priority":
+                jobs[-1][key] = int(value)
+            elif key == "wildcards":
+                jobs[-1][key] = dict(item.split("=", 1) for item in value.strip().split(", "))
+            else:
+                jobs[-1][key] = [item.strip() for item in value.split(",")]
     return jobs
 
 
@@ -105,20 +113,18 @@ def job_times(workdir: str | Path, keep: set[str] | None = None) -> pd.DataFrame
     return pd.DataFrame(rows).sort_values("wall_s", ascending=False, kind="stable").reset_index(drop=True)
 
 
-#: Snakemake's CPU sampling (snakemake/benchmark.py: BENCHMARK_INTERVAL_SHORT for the first
-#: 30 samples, then BENCHMARK_INTERVAL), seconds
-SAMPLE_SHORT_S, SAMPLES_SHORT, SAMPLE_S = 0.5, 30, 30.0
-
-
 def cpu_unsampled_bound(wall_s) -> float:
     """At most how many CPU seconds the benchmark files' ``cpu_time`` leaves out, summed over jobs
     of these wall times (seconds): a job's CPU after its last sample, on one core at most the wall
     time since that sample: one short interval while the short samples last, then up to one long
-    interval (module doc)."""
-    short_s = SAMPLE_SHORT_S * SAMPLES_SHORT
+    interval (module doc). The intervals are Snakemake's own (its ScheduledPeriodicTimer takes
+    BENCHMARK_INTERVAL short samples, then samples every BENCHMARK_INTERVAL seconds)."""
+    from snakemake.benchmark import BENCHMARK_INTERVAL, BENCHMARK_INTERVAL_SHORT
+
+    short_s = BENCHMARK_INTERVAL_SHORT * BENCHMARK_INTERVAL
     wall = pd.Series(wall_s, dtype=float)
-    return float(wall.where(wall <= short_s, 0.0).clip(upper=SAMPLE_SHORT_S).sum()
-                 + (wall[wall > short_s] - short_s).clip(upper=SAMPLE_S).sum())
+    return float(wall.where(wall <= short_s, 0.0).clip(upper=BENCHMARK_INTERVAL_SHORT).sum()
+                 + (wall[wall > short_s] - short_s).clip(upper=BENCHMARK_INTERVAL).sum())
 
 
 #: where the workflow's rule machine_speed writes benchmarks/machine_speed.py's numbers
