@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     if args.command == "stage-times":
         from ifenn.studies.stage_times import (
             MACHINE_SPEED,
-            cpu_unsampled_bound,
+            cpu_sampling_line,
             critical_path,
             dag_jobs,
             job_times,
@@ -104,8 +104,7 @@ def main(argv=None) -> int:
         table = stage_times(args.workdir, keep)
         print(table.to_markdown(index=False))
         jobs = job_times(args.workdir, keep)
-        print(f"\ncpu_s is Snakemake's last sample of each job's CPU time (every 0.5 s for 15 s, then every 30 s): "
-              f"it leaves out at most {cpu_unsampled_bound(jobs.wall_s):.0f} s here; wall_s is exact")
+        print("\n" + cpu_sampling_line(jobs.wall_s))
         machine = machine_speed_line(args.workdir)
         print(machine or f"the machine: not measured ({MACHINE_SPEED} is written by the workflow's first job)")
         chain_s, chain = 0.0, []

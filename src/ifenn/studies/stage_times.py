@@ -127,6 +127,16 @@ def cpu_unsampled_bound(wall_s) -> float:
                  + (wall[wall > short_s] - short_s).clip(upper=BENCHMARK_INTERVAL).sum())
 
 
+def cpu_sampling_line(wall_s) -> str:
+    """What the CPU column is and what it leaves out for jobs of these wall times (one line, with
+    Snakemake's own sampling intervals)."""
+    from snakemake.benchmark import BENCHMARK_INTERVAL, BENCHMARK_INTERVAL_SHORT
+
+    return (f"cpu_s is Snakemake's last sample of each job's CPU time (every {BENCHMARK_INTERVAL_SHORT:g} s for "
+            f"{BENCHMARK_INTERVAL_SHORT * BENCHMARK_INTERVAL:g} s, then every {BENCHMARK_INTERVAL:g} s): it leaves out at most "
+            f"{cpu_unsampled_bound(wall_s):.0f} s here; wall_s is exact")
+
+
 #: where the workflow's rule machine_speed writes benchmarks/machine_speed.py's numbers
 MACHINE_SPEED = Path("results") / "benchmarks" / "machine_speed.json"
 
