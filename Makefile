@@ -6,7 +6,7 @@ SHELL := /bin/bash
 VENV := .venv
 STAMP := $(VENV)/.installed
 # libopenblas0-serial: PETSc's BLAS/LAPACK (Debian's alternatives pick it over the reference BLAS);
-# MUMPS's dense fronts are about 3x faster with it (environment-notes.md, eighth session)
+# MUMPS's dense fronts are about 3x faster with it (docs/decisions.md, "OpenBLAS and MUMPS")
 APT_PACKAGES := python3-dolfinx-real python3-venv python3-h5py openmpi-bin g++ libopenblas0-serial
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 WHEELS := $(wildcard /opt/wheels)

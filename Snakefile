@@ -44,6 +44,7 @@ include: "workflow/rules/adaptive.smk"
 rule all:
     input:
         "results/benchmarks/machine_speed.json",
+        "results/summary.md",
         expand("results/mesh/{scene}.png", scene=config["scenes"]),
         expand("results/fem/{run}/history.csv", run=ALL_FEM_RUNS),
         expand("results/figures/fem/{run}_force_displacement.png", run=ALL_FEM_RUNS),

@@ -1,4 +1,4 @@
-"""The GPU issue's figures in one run, per device side by side (the CPU, and CUDA where torch sees
+"""The GPU figures in one run, per device side by side (the CPU, and CUDA where torch sees
 one): training of the default PICNN preset, the network on the whole image, and the verified
 phase-field step (check + multigrid-PCG correction) on a crack growing across an image of
 snt3's size. Self-contained: it needs torch, numpy, scipy, pandas and pyyaml, no dolfinx and no

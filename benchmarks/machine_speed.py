@@ -2,25 +2,22 @@
 paper's snt1 displacement matrix (200 x 200 Q1 elements, 80,922 dofs, phi = 0) by MUMPS's
 Cholesky, factorisation and solve, one core.
 
-The sessions' machines differ up to ~3x (environment-notes.md, twentieth session): seconds
-measured on different days compare only after scaling by this number. Run it before timing
-the paper DAG and quote it beside the DAG's time. Reference values: 0.14 s (2026-12-06, the
-machine of the eighteenth session's 66.5-minute DAG), 0.37 s (the twentieth session's).
+Machines differ up to ~3x: seconds measured on different machines compare only after scaling by
+this number. Run it before timing the paper DAG and quote it beside the DAG's time.
 
 A DAG runs two jobs at once, and two jobs on a machine's two "cores" may slow each other (shared
 caches and memory bandwidth, or two hyperthreads of one core): ``--copies 2`` runs the measurement
 in two processes at once and prints both, which says how a machine serves the DAG's condition.
 The second number, one apply of the default preset's kept block Cholesky factor (memory-bound
-triangular solves), is the better unit for the FEM and IFENN runs: the twenty-first session's
-machine, alone, factored 1.4x slower than the eighteenth's (0.191 s) and applied 3.8x slower
-(25.9 ms against 6.9 ms; two copies at once 29.0 / 26.5 ms), and its paper DAG's snt3-II pair
-took 2.4x as long (1,314 s against 546 s).
+triangular solves), is the better unit for the FEM and IFENN runs: a machine that factored 1.4x
+slower than the reference below (0.191 s) applied 3.8x slower (25.9 ms against 6.9 ms; two copies
+at once 29.0 / 26.5 ms), and its paper DAG's snt3-II pair took 2.4x as long (1,314 s against 546 s).
 
     .venv/bin/python benchmarks/machine_speed.py [--repeat N] [--copies 2] [--out results/benchmarks/machine_speed.json]
 
 The workflow runs it alone at the start of every DAG (rule machine_speed, ``--out``), so a DAG's
 benchmark files come with the machine they were measured on; ``python -m ifenn stage-times``
-prints the two numbers beside the sums (:data:`REFERENCE`: the eighteenth session's machine).
+prints the two numbers beside the sums (:data:`REFERENCE`).
 """
 
 from __future__ import annotations
@@ -40,7 +37,8 @@ from petsc4py import PETSc
 from ifenn.config import REPO, fem_run_spec, load_config
 from ifenn.io import atomic_path
 
-#: the machine of the eighteenth session, whose paper DAG took 66.5 min on 2 cores
+#: the reference machine: a 2-core machine whose MUMPS factor + solve of snt1 takes 0.14 s and whose
+#: kept-factor apply takes 6.9 ms; its paper DAG took 66.5 min on 2 cores
 REFERENCE = {"mumps_factor_solve_s": 0.14, "kept_factor_apply_ms": 6.9}
 
 
@@ -93,7 +91,7 @@ def main() -> int:
         seconds.append(time.perf_counter() - started)
     print(f"snt1 displacement matrix ({A.getSize()[0]:,} dofs), MUMPS Cholesky factor + solve, one core: "
           f"median {np.median(seconds[1:]):.3f} s over {args.repeat} (first, with the analysis: {seconds[0]:.3f} s); "
-          f"the eighteenth session's machine: {REFERENCE['mumps_factor_solve_s']} s")
+          f"the reference machine: {REFERENCE['mumps_factor_solve_s']} s")
     # the unit of the default preset (cholesky-reuse): one apply of the kept block Cholesky factor,
     # a CG iteration's preconditioner (memory-bound triangular solves)
     from ifenn.fem.factor import NestedDissectionCholesky
@@ -108,12 +106,12 @@ def main() -> int:
         pc.apply(b, x)
         applies.append(time.perf_counter() - started)
     print(f"the kept block Cholesky factor (cholesky-reuse) of the same matrix: one apply median {1e3 * np.median(applies):.1f} ms "
-          f"(the eighteenth session's machine: {REFERENCE['kept_factor_apply_ms']} ms)")
+          f"(the reference machine: {REFERENCE['kept_factor_apply_ms']} ms)")
     if args.out:
         record = {"mumps_factor_solve_s": round(float(np.median(seconds[1:])), 4),
                   "kept_factor_apply_ms": round(1e3 * float(np.median(applies)), 2), "dofs": A.getSize()[0],
-                  "repeat": args.repeat, "host": platform.node(), "machine": platform.machine(),
-                  "reference": {**REFERENCE, "what": "the eighteenth session's machine (its paper DAG: 66.5 min on 2 cores)"}}
+                  "repeat": args.repeat, "date": time.strftime("%Y-%m-%d", time.gmtime()), "host": platform.node(), "machine": platform.machine(),
+                  "reference": {**REFERENCE, "what": "a 2-core machine, MUMPS factor 0.14 s, kept-factor apply 6.9 ms (its paper DAG: 66.5 min on 2 cores)"}}
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(args.out) as tmp:
             Path(tmp).write_text(json.dumps(record, indent=1) + "\n")

@@ -1,4 +1,4 @@
-"""What a network is worth to the verified step (issue 26; ifenn.studies.network_worth): the
+"""What a network is worth to the verified step (ifenn.studies.network_worth): the
 correction's CG iterations and the step's time per warm start (no network, the paper's network,
 extrapolation, and the two oracles that bound any network of that role), on the history images of
 each run's own verified loop. Needs the FEM runs, meshes and trained PICNN of the workflow

@@ -159,7 +159,7 @@ def test_kept_cholesky_factor_agrees_with_a_direct_solve_across_a_crack_run(quic
     assert kept_solves and max(kept_solves) > 1
     assert (context.order is not None) == (matrix == "baij")
     # the quick scene's 30 coarse steps move g by more than 5 % most increments: fewer factors
-    # than solves, not many fewer (at paper scale ~60 of 700, environment-notes.md)
+    # than solves, not many fewer (at paper scale ~60 of 700, docs/decisions.md)
     assert context.factorizations == kept.reuse.refreshes < len(spec["load"])
     assert kept.reuse.reasons[0] == "first" and set(kept.reuse.reasons[1:]) <= {"stiffness", "iterations"}
     # a fresh factor of the matrix itself is its exact inverse: CG stops after one iteration

@@ -208,6 +208,33 @@ def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):
     assert stage_times(tmp_path, keep).set_index("stage").loc["total", "wall_s"] == 100.0
 
 
+def test_the_snakemake_patch_is_checked_against_the_pinned_snakemake():
+    """ifenn.snakemake_patch applies only to the Snakemake code it was checked against: the pinned
+    version's wake-up method and scheduling loop hash to what CHECKED records. An upgrade that
+    changes either fails here, so the patch is measured again (benchmarks/snakemake_scheduler.py)
+    before it is trusted, or removed."""
+    import re
+
+    from ifenn import snakemake_patch
+
+    repo = __import__("pathlib").Path(__file__).resolve().parents[1]
+    pinned = re.search(r"^snakemake==(\S+)$", (repo / "requirements.txt").read_text(), flags=re.M).group(1)
+    assert pinned in snakemake_patch.CHECKED
+    assert snakemake_patch.upstream_fingerprint() == (pinned, snakemake_patch.CHECKED[pinned])
+    # elsewhere it leaves Snakemake alone
+    saved = dict(snakemake_patch.CHECKED)
+    try:
+        snakemake_patch.CHECKED.clear()
+        snakemake_patch.CHECKED[pinned] = "0" * 64
+        from snakemake.scheduling.job_scheduler import JobScheduler
+
+        if JobScheduler._schedule_reevalutation is not snakemake_patch._reevaluate_once:
+            assert not snakemake_patch.apply()
+    finally:
+        snakemake_patch.CHECKED.clear()
+        snakemake_patch.CHECKED.update(saved)
+
+
 def test_the_snakemake_scheduler_keeps_one_wakeup_pending():
     """ifenn.snakemake_patch: the scheduler's re-evaluation timers no longer multiply; asked for
     many wake-ups while one is pending, the scheduler is woken once, and again after that one."""

@@ -102,7 +102,7 @@ def test_quick_slice_through_slurm_equals_local_run(local_cluster, tmp_path):
     # same code, same ranks and threads: the numbers agree to the FEM's solver tolerance. Under
     # SLURM's launcher the two ranks' sums may reduce in another order, and CG (rtol 1e-8) then
     # stops on other round-offs: measured 2.3e-6 of the largest force, 1.7e-5 of the training loss
-    # (2026-12-04); the same tolerance the direct and iterative solvers agree to (test_solver)
+    # the same tolerance the direct and iterative solvers agree to (test_solver)
     for csv, tolerance in (("fem/snt1-I/history.csv", 1e-5), ("picnn/loss.csv", 1e-4), ("picnn/scores.csv", 1e-5),
                            ("ifenn/snt1-I/history.csv", 1e-5)):
         there, here = _values(slurm / "results" / csv), _values(local / "results" / csv)

@@ -55,9 +55,15 @@ def test_quick_profile_runs_end_to_end(quick_workflow):
                    "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png",
                    "speed_accuracy.png", "stability_map.png"):
         assert (results / "figures" / figure).stat().st_size > 10_000, figure
+    # the numbers the docs quote come from this run: results/summary.md renders its tables and machine
+    summary = (results / "summary.md").read_text()
+    speed = pd.read_csv(results / "tables" / "speed_accuracy.csv")
+    assert f"{speed.force_l2_rel_error.iloc[1]:.4g}" in summary and "(tables/speed_accuracy.csv)" in summary
+    machine = __import__("json").loads((results / "benchmarks" / "machine_speed.json").read_text())
+    assert f"{machine['kept_factor_apply_ms']} ms" in summary and "Not produced" not in summary
 
 
-def test_quick_profile_issue5_results(quick_workflow):
+def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     """Process-zone IFENN tracks full-image IFENN (force curve within 0.5 %) on every run of
     the quick profile; the speed/accuracy table, the stability CSV and the phase-field
     benchmark have a row for what the config names."""
@@ -132,8 +138,8 @@ def test_changing_an_ifenn_option_reruns_only_ifenn_and_its_dependents(quick_wor
 def test_instant_jobs_that_unlock_runs_come_first(tmp_path):
     """The paper DAG: every spec job (instant) has the top priority, so a run whose own priority
     is high (a long chain behind it) is not held back behind long jobs by its spec; a run that
-    waits for another starts once it is free (fem_priority). Without it (paper DAG, 2026-12-06), the
-    snt1-II pair's spec ran 47 min after the network it waited for, FEM snt1-III behind the pair."""
+    waits for another starts once it is free (fem_priority). Without it, in the
+    paper DAG the snt1-II pair's spec ran 47 min after the network it waited for, FEM snt1-III behind the pair."""
     dry = _snakemake("--directory", str(tmp_path), "-n", "--forceall", "--cores", "2", "all", cwd=tmp_path)
     assert dry.returncode == 0, dry.stderr[-3000:]
     jobs = parse_dry_run(dry.stdout + dry.stderr)
@@ -146,7 +152,7 @@ def test_instant_jobs_that_unlock_runs_come_first(tmp_path):
 
 def test_adaptive_finer_references_replace_the_uniform_ones(tmp_path):
     """finer_references: adaptive: each finer reference of reference_convergence and
-    adaptive_resolution is its adaptive run; `all` no longer runs the uniform ones (speed_accuracy's
+    adaptive_resolution is its adaptive run; `all` does not run the uniform ones (speed_accuracy's
     points snt1-III-fine and sdnt-fine become their adaptive runs too)."""
     override = tmp_path / "override.yaml"
     override.write_text("finer_references: adaptive\n")
@@ -242,7 +248,7 @@ def test_quick_profile_verified_runs_track_fem(quick_workflow):
 
 
 def test_quick_profile_whole_path(quick_workflow):
-    """Issue 13 through the DAG: the seven whole-path runs (IFENN from the first increment, no
+    """Whole-path IFENN through the DAG: the seven whole-path runs (IFENN from the first increment, no
     hybrid_active 0 row) compared with their FEM runs (on the quick scene all four targets are met:
     peaks within 0.1 % of FEM at h; adnt and the shear scene within 0.15 %: with their slits cut in
     the pixel equation adnt's peak is 0.14 % below FEM's, snt-shear's 0.12 %), the pre-nucleation
@@ -275,7 +281,7 @@ def test_quick_profile_reference_convergence(quick_workflow):
     adnt / snt-shear), every whole-path run is nearer the finer FEM than FEM at h is (0.29-0.86 %), and so is
     every verified snt1 run (0.64-0.85 %): the pixel equation on the Gauss-point grid resolves the
     phase field at h/2. A verified run that switches late follows FEM at h after the switch (adnt:
-    0.03 % apart) and is then as far from the finer FEM as FEM is, never farther. Paper scale: README."""
+    0.03 % apart) and is then as far from the finer FEM as FEM is, never farther. Paper scale: docs/decisions.md."""
     table = pd.read_csv(results := quick_workflow / "results" / "tables" / "reference_convergence.csv", keep_default_na=False)
     assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear"}
     fem = table[table.method == "fem"].set_index("case")
@@ -296,7 +302,7 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
     within 1 % of the finer peak (measured 0.08 % and 0.17-0.19 %), nearer than FEM at h (0.42 %,
     1.02 %); the two adaptive methods agree to the verified step's certificate. The quick scene's
     lc is a sixth of the specimen, so its fine region soon covers it: the dofs and wall targets are
-    judged at the paper's scale (README)."""
+    judged at the paper's scale (docs/decisions.md)."""
     results = quick_workflow / "results"
     table = pd.read_csv(results / "tables" / "adaptive_resolution.csv").set_index("run")
     assert set(table.method) == {"fem-uniform", "fem-adaptive", "verified-adaptive"}

@@ -1,19 +1,45 @@
-"""A workaround for Snakemake 9's scheduler waking itself ever more often (applied by the Snakefile).
+"""A workaround for Snakemake's scheduler waking itself ever more often (applied by the Snakefile).
 
-With the default ``--max-jobs-per-timespan 100/1s``, every scheduling pass that finds the cores
-busy starts a 1-s ``threading.Timer`` to run the scheduler again
-(``JobScheduler._schedule_reevalutation``), and each wake-up starts another: every job event adds
-a chain, so the wake-ups per second grow with the jobs finished. In the paper DAG (299 jobs, 2
-cores; environment-notes.md, twenty-first session) Snakemake's main thread took 1,176 s of CPU in
-119 minutes, 808,473 timers, ~230 alive at a time, a sixth of a core taken from the two jobs.
-Keeping at most one wake-up pending leaves the scheduling as it was (120 one-second jobs on 2
-cores: 65.6 s against 66.7 s) at a fraction of the scheduler's CPU. A longer timespan is no cure:
-the scheduler then waits for the timer (126 s for the same 120 jobs).
+The defect, as a bug report would state it
+-------------------------------------------
+Affected: Snakemake 9.27.1 (``snakemake/scheduling/job_scheduler.py``), default
+``--max-jobs-per-timespan 100/1s``, local execution.
+
+What happens: every pass of ``JobScheduler.schedule`` that has ready jobs ends by calling
+``_schedule_reevalutation(timespan)``, which starts a ``threading.Timer`` that releases
+``_open_jobs`` one second later and so runs another pass, which starts another timer. Any job
+event (a job finished) also releases ``_open_jobs`` and starts one more such chain. Nothing ends a
+chain while jobs are ready and waiting for cores, so the number of chains grows with the jobs
+finished, and the scheduler's wake-ups per second with it: their total grows with the square of
+the time jobs wait. In a paper-scale DAG of this project (299 jobs, 2 cores, two hours) the
+Snakemake process created 808,473 timer threads (~230 alive at a time) and its main thread used
+1,176 s of CPU in the first 119 minutes: a sixth of one of the two cores the jobs needed.
+
+Reproduce: ``benchmarks/snakemake_scheduler.py`` (independent jobs that only sleep, all ready at
+the start, on 2 cores) prints the Snakemake process's CPU with and without this patch; the
+difference grows with the square of the run's length.
+
+Expected: at most one pending wake-up; a job event wakes the scheduler anyway. A longer timespan
+is no cure: the scheduler then waits for the timer between jobs.
+
+The workaround: :func:`apply` replaces ``_schedule_reevalutation`` by one that keeps at most one
+wake-up pending. It applies only where the method and the scheduling loop are exactly those it was
+checked against (:data:`CHECKED`, by version and by a hash of their source); anywhere else it
+leaves Snakemake as it is and returns False. ``tests/test_run_files.py`` fails when the pinned
+Snakemake's code changes under it, so an upgrade is checked again before it is trusted.
 """
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import threading
+
+#: Snakemake versions whose ``JobScheduler._schedule_reevalutation`` and ``JobScheduler.schedule``
+#: this patch was checked against: version -> sha256 of the two methods' source, concatenated
+CHECKED = {"9.27.1": "165ad39f9c8ec0cfa7dc376d316adcf280ccf65f95fe859bd2a8eef779f49685"}
+
+_original = None
 
 
 def _reevaluate_once(self, delay) -> None:
@@ -30,13 +56,35 @@ def _reevaluate_once(self, delay) -> None:
     timer.start()
 
 
+def upstream_fingerprint() -> tuple[str, str] | None:
+    """(Snakemake's version, sha256 of its unpatched wake-up method and scheduling loop), or None
+    where the scheduler has no such method."""
+    import snakemake
+
+    try:
+        from snakemake.scheduling.job_scheduler import JobScheduler
+    except ImportError:
+        return None
+    method = _original or getattr(JobScheduler, "_schedule_reevalutation", None)
+    if method is None or method is _reevaluate_once:
+        return None
+    source = inspect.getsource(method) + inspect.getsource(JobScheduler.schedule)
+    return snakemake.__version__, hashlib.sha256(source.encode()).hexdigest()
+
+
 def apply() -> bool:
-    """Patch Snakemake's JobScheduler where it has the method (Snakemake 9); False elsewhere."""
+    """Patch Snakemake's JobScheduler where its code is the one checked (:data:`CHECKED`); False
+    elsewhere, leaving it unchanged."""
+    global _original
     try:
         from snakemake.scheduling.job_scheduler import JobScheduler
     except ImportError:
         return False
-    if not hasattr(JobScheduler, "_schedule_reevalutation"):
+    if JobScheduler._schedule_reevalutation is _reevaluate_once:
+        return True
+    fingerprint = upstream_fingerprint()
+    if fingerprint is None or CHECKED.get(fingerprint[0]) != fingerprint[1]:
         return False
+    _original = JobScheduler._schedule_reevalutation
     JobScheduler._schedule_reevalutation = _reevaluate_once
     return True

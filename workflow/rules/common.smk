@@ -286,3 +286,25 @@ def adaptive_resolution_inputs(wildcards):
             files += [f"{folder}/history.csv", f"{folder}/provenance.json", f"{folder}/spec.json"]
         files += [f"{folder}/fields.h5" for folder in where["adaptive_dirs"].values()]
     return files
+
+
+# The tables results/summary.md renders (ifenn.studies.summary.SECTIONS): those this config produces.
+SUMMARY_TABLES = {
+    key: path
+    for key, path, produced in [
+        ("accuracy", "results/tables/accuracy.csv", True),
+        ("timing", "results/tables/timing.csv", True),
+        ("speed_accuracy", "results/tables/speed_accuracy.csv", config.get("speed_accuracy")),
+        ("adaptive_resolution", "results/tables/adaptive_resolution.csv", config.get("adaptive_resolution")),
+        ("reference_convergence", "results/tables/reference_convergence.csv", config.get("reference_convergence")),
+        ("whole_path", "results/tables/whole_path.csv", config.get("whole_path")),
+        ("process_zone", "results/tables/process_zone.csv", PROCESS_ZONE_PAIRS),
+        ("error_sources", "results/tables/error_sources.csv", config.get("error_sources")),
+        ("stability", "results/tables/stability.csv", config.get("stability")),
+        ("phase_field_speed", "results/benchmarks/phase_field_speed.csv", config.get("phase_field_benchmark")),
+        ("whole_run_speed", "results/benchmarks/whole_run_speed.csv", config.get("whole_run_benchmark")),
+        ("increment_speed", "results/benchmarks/increment_speed.csv", config.get("increment_benchmark")),
+        ("network_worth", "results/benchmarks/network_worth.csv", config.get("network_worth")),
+    ]
+    if produced
+}

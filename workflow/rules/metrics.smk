@@ -199,3 +199,24 @@ rule reference_convergence:
         "benchmarks/tables/reference_convergence.tsv"
     script:
         "../scripts/reference_convergence.py"
+
+
+rule summary:
+    """results/summary.md: the numbers docs/ quotes, rendered from this run's tables with the machine
+    they ran on and the date (ifenn.studies.summary)."""
+    input:
+        unpack(lambda w: SUMMARY_TABLES),
+        machine="results/benchmarks/machine_speed.json",
+    output:
+        report("results/summary.md", caption="../report/summary.rst", category="Summary"),
+    params:
+        tables=SUMMARY_TABLES,
+        config_files=[os.path.basename(f) for f in workflow.configfiles],
+    conda:
+        "../envs/ifenn.yaml"
+    log:
+        "logs/tables/summary.log",
+    benchmark:
+        "benchmarks/tables/summary.tsv"
+    script:
+        "../scripts/summary.py"

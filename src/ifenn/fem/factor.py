@@ -9,7 +9,7 @@ the AIJ matrix applies fast and factors slowly (0.33 s, 6.2 ms). PETSc's block (
 blocks) Cholesky has both (0.16 s, 6.9 ms), but takes no fill-reducing ordering of its own: this
 preconditioner permutes the matrix by nested dissection (computed once: the pattern never
 changes), converts it to SBAIJ and factors that; an apply permutes in and out
-(environment-notes.md, eighteenth session).
+(docs/decisions.md, "A kept Cholesky factor").
 
 Select it as a PETSc python preconditioner::
 

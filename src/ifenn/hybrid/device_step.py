@@ -1,4 +1,4 @@
-"""The verified phase-field step in torch, on the run's device (the GPU's path; issue 32 step 2).
+"""The verified phase-field step in torch, on the run's device (the GPU's path).
 
 The same step as :class:`ifenn.hybrid.verification.VerifiedInference` (read its module doc for
 the equation, the certificate and the warm starts), with every array a torch tensor on one

@@ -1,4 +1,4 @@
-"""A network trained for the job it has in the verified loop (issue 26): the change of phi over an
+"""A network trained for the job it has in the verified loop: the change of phi over an
 increment, from what the check already computes.
 
 Over an increment the history grows from H_old to H, and the last verified phi_old fails the new

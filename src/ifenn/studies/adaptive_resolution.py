@@ -17,7 +17,7 @@ runs "fem-adaptive", the certified pixel solve, or "verified-adaptive", the veri
 - per adaptive run, the rebuilds and the increments whose crack core still left the fine region
   (``outside_fine``: reported, never hidden).
 
-``meets_*`` mark the issue's targets: RMS <= 2 %, |peak error| <= 1 %, wall <= FEM at h's, mean
+``meets_*`` mark the targets: RMS <= 2 %, |peak error| <= 1 %, wall <= FEM at h's, mean
 dofs <= 30 % of the fine mesh.
 """
 

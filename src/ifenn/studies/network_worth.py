@@ -1,4 +1,4 @@
-"""What a network can be worth to the verified step (issue 26): the correction's work and the
+"""What a network can be worth to the verified step: the correction's work and the
 step's time for each warm start, on the history images of the verified loop itself, and the
 bounds no network of that role can beat.
 

@@ -648,7 +648,7 @@ def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> 
 def network_worth_figure(summary, path, target: float = 1.5) -> None:
     """What a network is worth to the verified step (ifenn.studies.network_worth), one panel per run:
     the step's time per warm start against the share of the image where the predictor answers,
-    with the step without a network and the issue's target (``target`` x faster) as lines. The oracles
+    with the step without a network and the target (``target`` x faster) as lines. The oracles
     answer exactly and for free: no network asked on a zone can do better than its oracle there."""
     runs = list(dict.fromkeys(summary.run))
     fig, axes = plt.subplots(1, len(runs), figsize=(4.6 * len(runs), 4.0), squeeze=False)

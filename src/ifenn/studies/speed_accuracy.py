@@ -7,7 +7,7 @@ converged in the mesh and in the load path: the finest schedule with converged s
 adaptive mesh whose finest cells have the finer uniform FEM's spacing ('snt1-III-conv-adaptive' for
 snt1: h/2, the 400 x 400 mesh's), so FEM at h is a point with its own discretisation error like every
 other. The finer uniform FEM is a point too: single-pass staggering lags the converged load path
-after the peak, by more than the mesh at h errs (measured in the README). Errors: the
+after the peak, by more than the mesh at h errs (measured: docs/decisions.md). Errors: the
 relative L2(u) error of the force curve over the common u range (metrics.force_curve_error), the
 post-peak force RMS over the reference's peak (metrics.post_peak_rms) and the peak force's. Wall time: the sum of the per-increment times recorded in
 history.csv (an IFENN run's history holds the FEM increments it continued, so its whole-run

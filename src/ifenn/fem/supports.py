@@ -1,0 +1,159 @@
+"""Supports and loads of a scene: whole edges, parts of edges, and single nodes.
+
+A scene's ``boundary`` maps
+
+- an edge (``left``, ``right``, ``bottom``, ``top``) to ``{x: fixed|load, y: fixed|load}``: the
+  condition on the whole edge;
+- or an edge to a list of parts ``[{range: [a, b], x: ..., y: ...}]``: the condition on the nodes
+  of the edge whose coordinate along it (x on bottom and top, y on left and right) lies in
+  [a, b];
+- ``points`` to a list ``[{at: [x, y], x: ..., y: ...}]``: the condition on one mesh node (a pinned
+  support fixes x and y, a roller one of them, a point load prescribes ``load``).
+
+``fixed`` holds the component at zero, ``load`` prescribes it to the load of the increment (mm).
+The reaction force a run reports is the sum of the internal forces on the loaded dofs in their
+loaded direction (N per mm of thickness). Every part and point lies on mesh nodes: the checks
+refuse one that does not (never snapped silently), and a set of supports that leaves a rigid-body
+motion free (:func:`problems`).
+
+:func:`conditions` turns a scene into :class:`Condition` objects that select nodes by their
+coordinates, so the uniform mesh (dolfinx) and the adaptive quadtree use the same definition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+EDGES = ("left", "right", "bottom", "top")
+COMPONENTS = {"x": 0, "y": 1}
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One prescribed displacement component on a set of boundary nodes."""
+
+    key: str                      # the config key it comes from, for messages
+    component: int                # 0: x, 1: y
+    kind: str                     # "fixed" or "load"
+    edge: str | None              # the edge it lies on; None for a point
+    start: tuple[float, float]    # the part's ends (a point: both the point), mm
+    end: tuple[float, float]
+    tolerance: float              # mm: a node within it of the part is on it
+
+    def selects(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Which of the nodes at (x, y) this condition holds (boolean mask)."""
+        (ax, ay), (bx, by), tol = self.start, self.end, self.tolerance
+        return ((x >= min(ax, bx) - tol) & (x <= max(ax, bx) + tol)
+                & (y >= min(ay, by) - tol) & (y <= max(ay, by) + tol))
+
+    @property
+    def is_point(self) -> bool:
+        return self.edge is None
+
+
+def _edge_segment(edge: str, domain: dict, along: tuple[float, float] | None):
+    (x0, x1), (y0, y1) = domain["x"], domain["y"]
+    if edge in ("bottom", "top"):
+        y = y0 if edge == "bottom" else y1
+        a, b = along if along is not None else (x0, x1)
+        return (a, y), (b, y)
+    x = x0 if edge == "left" else x1
+    a, b = along if along is not None else (y0, y1)
+    return (x, a), (x, b)
+
+
+def conditions(scene: dict, key: str = "scene") -> list[Condition]:
+    """The scene's boundary conditions, one per (part, component), in config order."""
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    tol = 1e-9 * max(x1 - x0, y1 - y0)
+    found = []
+    for edge, spec in scene["boundary"].items():
+        if edge == "points":
+            for i, point in enumerate(spec):
+                at = (float(point["at"][0]), float(point["at"][1]))
+                found += [Condition(f"{key}.boundary.points[{i}]", COMPONENTS[c], kind, None, at, at, tol)
+                          for c, kind in point.items() if c in COMPONENTS]
+            continue
+        parts = spec if isinstance(spec, list) else [dict(spec)]
+        for i, part in enumerate(parts):
+            start, end = _edge_segment(edge, scene["domain"], part.get("range"))
+            part_key = f"{key}.boundary.{edge}" + (f"[{i}]" if isinstance(spec, list) else "")
+            found += [Condition(part_key, COMPONENTS[c], kind, edge, start, end, tol)
+                      for c, kind in part.items() if c in COMPONENTS]
+    return found
+
+
+def _on_grid(value: float, origin: float, h: float) -> bool:
+    steps = (value - origin) / h
+    return abs(steps - round(steps)) < 1e-6
+
+
+def problems(scene: dict, key: str) -> list[str]:
+    """What is wrong with the scene's supports and loads, one message per problem naming the key:
+    a part off its edge or with its ends between mesh nodes, a point off the mesh's nodes, no load,
+    or supports that leave a rigid-body motion free."""
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    nx, ny = scene["elements"]
+    h = (x1 - x0) / nx
+    found = []
+    for edge, spec in scene["boundary"].items():
+        if edge == "points" or not isinstance(spec, list):
+            continue
+        low, high = (x0, x1) if edge in ("bottom", "top") else (y0, y1)
+        origin = low
+        for i, part in enumerate(spec):
+            a, b = part["range"]
+            pkey = f"config key '{key}.boundary.{edge}[{i}].range'"
+            if not (low - 1e-12 <= a < b <= high + 1e-12):
+                found.append(f"{pkey}: {part['range']} must be an interval within the edge, [{low}, {high}], with a < b")
+            elif not (_on_grid(a, origin, h) and _on_grid(b, origin, h)):
+                found.append(f"{pkey}: its ends {part['range']} must lie on mesh nodes (every {h:g} mm from {origin:g}); "
+                             "a support or load between nodes is not snapped: move its ends or change the elements")
+    for i, point in enumerate(scene["boundary"].get("points", [])):
+        px, py = point["at"]
+        pkey = f"config key '{key}.boundary.points[{i}].at'"
+        if not (x0 - 1e-12 <= px <= x1 + 1e-12 and y0 - 1e-12 <= py <= y1 + 1e-12):
+            found.append(f"{pkey}: {point['at']} lies outside the domain x in [{x0}, {x1}], y in [{y0}, {y1}]")
+        elif not (_on_grid(px, x0, h) and _on_grid(py, y0, h)):
+            found.append(f"{pkey}: {point['at']} is not a mesh node (nodes every {h:g} mm from ({x0:g}, {y0:g})); "
+                         "a point support is not snapped: move it or change the elements")
+    if found:
+        return found
+    held = conditions(scene, key)
+    if not any(c.kind == "load" for c in held):
+        found.append(f"config key '{key}.boundary': no support prescribes 'load'; at least one must")
+    free = rigid_body_motions_left(held)
+    if free:
+        found.append(f"config key '{key}.boundary': the supports leave a rigid-body motion free ({', '.join(free)}); "
+                     "fix more components (a pinned point and a roller, or a fixed edge)")
+    return found
+
+
+def rigid_body_motions_left(held: list[Condition]) -> list[str]:
+    """The rigid-body motions of the plane that the prescribed components do not stop.
+
+    A rigid motion is u = (a - c y, b + c x); a prescribed x component at (px, py) demands
+    a - c py = 0, a y component b + c px = 0. Along a straight part these are linear in the
+    position, so its two ends stand for it. The motions left are the null space of those rows."""
+    rows = []
+    for c in held:
+        for px, py in (c.start, c.end):
+            rows.append([1.0, 0.0, -py] if c.component == 0 else [0.0, 1.0, px])
+    if not rows:
+        return ["x translation", "y translation", "rotation"]
+    matrix = np.asarray(rows)
+    _, singular, vt = np.linalg.svd(matrix)
+    scale = max(1.0, np.abs(matrix).max())
+    rank = int((singular > 1e-10 * scale).sum())
+    names = []
+    for mode in vt[rank:]:
+        a, b, c = mode / np.abs(mode).max()
+        if abs(c) > 1e-8:
+            names.append("a rotation")
+        elif abs(a) > 1e-8 and abs(b) > 1e-8:
+            names.append("a translation")
+        else:
+            names.append("x translation" if abs(a) > 1e-8 else "y translation")
+    return names
