@@ -105,9 +105,9 @@ def test_reactions_of_a_simply_supported_beam_on_the_uniform_mesh(quick_config, 
     half at each support, with no horizontal reaction and no net moment (phi = 0, one solve)."""
     import dolfinx.fem.petsc as fem_petsc
     import ufl
+    from conftest import build_problem
     from dolfinx import fem
 
-    from conftest import build_problem
     from ifenn.fem import physics
 
     presets = quick_config["solver"]["linear_solver_presets"]
@@ -131,7 +131,7 @@ def test_reactions_of_a_simply_supported_beam_on_the_adaptive_mesh():
     pixels = PixelGrid.for_scene(BEAM)
     h_fine = pixels.h_px
     target = np.zeros(pixels.shape, dtype=int)
-    target[2:5, 6:9] = 2                                       # some refinement off the supports
+    target[2:5, 6:9] = target[2:5, 23:26] = 2                  # refinement off the supports, mirror-symmetric
     target[anchor_cells(BEAM, (pixels.x0, pixels.y0), h_fine, pixels.shape)] = 2
     tree = build_quadtree(target, 2, (pixels.x0, pixels.y0), h_fine)
     assert (tree.cell_size > 1).any()
@@ -141,3 +141,26 @@ def test_reactions_of_a_simply_supported_beam_on_the_adaptive_mesh():
     forces = (problem.P_scipy.T @ problem.internal_force_full()).reshape(-1, 2)
     reactions = _support_reactions(forces, problem.free_coordinates)
     _check_statics(reactions, problem.reaction_force())
+
+
+def test_the_scene_picture_draws_parts_and_points(tmp_path):
+    from ifenn.fem.mesh import build_mesh
+    from ifenn.studies.plots import mesh_figure
+
+    mesh_figure(build_mesh(BEAM), BEAM, "beam", tmp_path / "beam.png")
+    assert (tmp_path / "beam.png").stat().st_size > 10_000
+
+
+def test_the_schema_takes_parts_and_points_and_the_run_spec_carries_them(quick_config):
+    """A scene with a loaded part and point supports passes the schema and the checks, and its
+    FEM run's spec holds them; a misspelt key is refused by name."""
+    from ifenn.config import ConfigError, fem_run_spec, validate_config
+
+    config = copy.deepcopy(quick_config)
+    config["scenes"]["beam"] = copy.deepcopy(BEAM)
+    config["fem_runs"]["beam"] = {"scene": "beam", "schedule": "I"}
+    checked = validate_config(config, petsc_names=False)
+    assert fem_run_spec(checked, "beam")["scene"]["boundary"]["points"][1] == {"at": [1.0, -0.25], "y": "fixed"}
+    config["scenes"]["beam"]["boundary"]["top"][0]["rnage"] = [0, 1]
+    with pytest.raises(ConfigError, match="scenes.beam.boundary"):
+        validate_config(config, petsc_names=False)

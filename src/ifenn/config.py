@@ -18,6 +18,7 @@ from typing import Any
 import jsonschema
 import yaml
 
+from ifenn.fem import supports
 from ifenn.network.settings import resolve_settings
 from ifenn.schema import REPO, SCHEMA_PATH, _schema  # noqa: F401 (REPO: for the benchmarks)
 
@@ -231,8 +232,7 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
             problems.append(f"config key '{key}.elements': {scene['elements']} on the domain {scene['domain']} gives "
                             f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
                             f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
-        if not any("load" in edge.values() for edge in scene["boundary"].values()):
-            problems.append(f"config key '{key}.boundary': no edge component is 'load'; at least one must be")
+        problems += supports.problems(scene, key)
         tol = 1e-12 * max(x1 - x0, y1 - y0)
         for i, notch in enumerate(scene.get("notches", [])):
             nkey = f"{key}.notches[{i}]"

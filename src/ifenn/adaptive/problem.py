@@ -35,8 +35,8 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ifenn.adaptive.quadtree import Quadtree
-from ifenn.fem import physics
-from ifenn.fem.problem import EDGE_COMPONENT, QUADRATURE, check_converged, configure_ksp, petsc_options
+from ifenn.fem import physics, supports
+from ifenn.fem.problem import QUADRATURE, check_converged, configure_ksp, petsc_options
 from ifenn.pixels import PixelGrid
 
 
@@ -178,17 +178,14 @@ class AdaptiveMeshProblem:
         self.free_coordinates = tree.points[free_nodes]
 
     def _build_boundary_conditions(self) -> None:
-        """Prescribed free dofs (fixed: 0, load: the load), by the scene's edges."""
-        (x0, x1), (y0, y1) = self.scene["domain"]["x"], self.scene["domain"]["y"]
-        tol = 1e-9 * max(x1 - x0, y1 - y0)
+        """Prescribed free dofs (fixed: 0, load: the load), by the scene's supports and loads
+        (ifenn.fem.supports), selected among the free nodes by their coordinates: the run makes the
+        ends of parts and the points nodes of the mesh (supports.anchor_cells)."""
         x = self.free_coordinates
-        on = {"left": np.abs(x[:, 0] - x0) < tol, "right": np.abs(x[:, 0] - x1) < tol,
-              "bottom": np.abs(x[:, 1] - y0) < tol, "top": np.abs(x[:, 1] - y1) < tol}
         fixed, loaded = [], []
-        for edge, components in self.scene["boundary"].items():
-            for component, kind in components.items():
-                dofs = 2 * np.flatnonzero(on[edge]) + EDGE_COMPONENT[component]
-                (loaded if kind == "load" else fixed).append(dofs)
+        for condition in supports.conditions(self.scene):
+            dofs = 2 * np.flatnonzero(condition.selects(x[:, 0], x[:, 1])) + condition.component
+            (loaded if condition.kind == "load" else fixed).append(dofs)
         self.loaded_dofs = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int64)
         fixed = np.unique(np.concatenate(fixed)) if fixed else np.empty(0, dtype=np.int64)
         self.fixed_dofs = np.setdiff1d(fixed, self.loaded_dofs)
@@ -258,6 +255,15 @@ class AdaptiveMeshProblem:
             local.set(0.0)
         fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
         return float((self.P_scipy.T @ self.internal_force.array)[self.loaded_dofs].sum())
+
+    def internal_force_full(self) -> np.ndarray:
+        """The internal force f(u) = int g(phi) sigma(u) : eps(v) of every cell, at every node of the
+        mesh (hanging ones included; P^T f gives it on the free dofs), N per mm of thickness."""
+        if not hasattr(self, "_internal_force_full_form"):
+            v = ufl.TestFunction(self.V)
+            self._internal_force_full_form = fem.form(
+                physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * self.dx)
+        return fem_petsc.assemble_vector(self._internal_force_full_form).array.copy()
 
     @property
     def n_dofs(self) -> int:

@@ -74,6 +74,7 @@ from ifenn import run_files
 from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
 from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
+from ifenn.fem import supports
 from ifenn.fem.loading import load_control
 from ifenn.io import progress_bar, provenance
 from ifenn.pixels import PixelGrid, SlitCuts
@@ -238,6 +239,7 @@ class AdaptiveRun:
         p = self.settings.pixels_per_fine_cell
         ny, nx = self.n_fine
         fine = region.reshape(ny, p, nx, p).any(axis=(1, 3))
+        fine |= supports.anchor_cells(self.scene, (self.grid.x0, self.grid.y0), self.h_fine, (ny, nx))
         return np.where(fine, self.levels, 0)
 
     def build_mesh(self, region: np.ndarray) -> None:

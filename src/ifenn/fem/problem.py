@@ -20,7 +20,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from ifenn.fem import physics
+from ifenn.fem import physics, supports
 from ifenn.pixels import PixelGrid
 
 QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
@@ -61,13 +61,6 @@ def check_converged(ksp: PETSc.KSP, what: str) -> int:
     if reason < 0:
         raise SolverDivergedError(f"{what} solve diverged: KSP_{_REASONS.get(reason, reason)} after {ksp.getIterationNumber()} iterations")
     return ksp.getIterationNumber()
-
-
-def _edge_marker(edge: str, domain: dict):
-    (x0, x1), (y0, y1) = domain["x"], domain["y"]
-    tol = 1e-9 * max(x1 - x0, y1 - y0)
-    coordinate, value = {"left": (0, x0), "right": (0, x1), "bottom": (1, y0), "top": (1, y1)}[edge]
-    return lambda x: np.abs(x[coordinate] - value) < tol
 
 
 def rigid_body_modes(V) -> PETSc.NullSpace:
@@ -257,19 +250,28 @@ class FractureProblem:
 
     # ------------------------------------------------------------------ set-up
     def _build_boundary_conditions(self) -> None:
-        fdim = self.domain.topology.dim - 1
+        """Dirichlet conditions of the scene's supports and loads (ifenn.fem.supports): edges and
+        their parts through the boundary facets they cover, points through their vertex."""
+        tdim = self.domain.topology.dim
+        fdim = tdim - 1
+        self.domain.topology.create_connectivity(0, tdim)
         self.load = fem.Constant(self.domain, PETSc.ScalarType(0.0))
         zero = fem.Constant(self.domain, PETSc.ScalarType(0.0))
         self.bcs, loaded = [], []
         n_owned = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        for edge, components in self.scene["boundary"].items():
-            facets = dmesh.locate_entities_boundary(self.domain, fdim, _edge_marker(edge, self.scene["domain"]))
-            for component, kind in components.items():
-                sub = self.V.sub(EDGE_COMPONENT[component])
-                dofs = fem.locate_dofs_topological(sub, fdim, facets)
-                self.bcs.append(fem.dirichletbc(self.load if kind == "load" else zero, dofs, sub))
-                if kind == "load":
-                    loaded.append(dofs)
+        for condition in supports.conditions(self.scene):
+            def marker(x, condition=condition):
+                return condition.selects(x[0], x[1])
+
+            if condition.is_point:
+                entities, dim = dmesh.locate_entities(self.domain, 0, marker), 0
+            else:
+                entities, dim = dmesh.locate_entities_boundary(self.domain, fdim, marker), fdim
+            sub = self.V.sub(condition.component)
+            dofs = fem.locate_dofs_topological(sub, dim, entities)
+            self.bcs.append(fem.dirichletbc(self.load if condition.kind == "load" else zero, dofs, sub))
+            if condition.kind == "load":
+                loaded.append(dofs)
         loaded = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int32)
         self._loaded_dofs_with_ghosts = loaded
         self.loaded_dofs = loaded[loaded < n_owned]

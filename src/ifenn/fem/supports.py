@@ -157,3 +157,34 @@ def rigid_body_motions_left(held: list[Condition]) -> list[str]:
         else:
             names.append("x translation" if abs(a) > 1e-8 else "y translation")
     return names
+
+
+def anchor_points(scene: dict) -> list[tuple[float, float]]:
+    """The points a mesh must have as nodes for the supports to be those of the config: the ends
+    of parts of edges and the point supports (a whole edge's ends are the domain's corners)."""
+    found = []
+    for edge, spec in scene["boundary"].items():
+        if edge == "points":
+            found += [(float(p["at"][0]), float(p["at"][1])) for p in spec]
+        elif isinstance(spec, list):
+            for part in spec:
+                start, end = _edge_segment(edge, scene["domain"], part["range"])
+                found += [start, end]
+    return found
+
+
+def anchor_cells(scene: dict, origin, h_fine: float, shape: tuple[int, int]) -> np.ndarray:
+    """Fine cells (rows = y, columns = x, ``shape``) that touch an anchor point: refined, they make
+    the point a node, and not a hanging one, of a quadtree mesh (and refine where a support or a
+    load concentrates the stress)."""
+    mask = np.zeros(shape, dtype=bool)
+    ny, nx = shape
+    for px, py in anchor_points(scene):
+        i, j = (px - origin[0]) / h_fine, (py - origin[1]) / h_fine
+        columns = sorted({int(np.floor(i + 1e-9)), int(np.ceil(i - 1e-9)) - 1})
+        rows = sorted({int(np.floor(j + 1e-9)), int(np.ceil(j - 1e-9)) - 1})
+        for r in rows:
+            for c in columns:
+                if 0 <= r < ny and 0 <= c < nx:
+                    mask[r, c] = True
+    return mask

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ifenn.fem import supports  # noqa: E402
 from ifenn.io import atomic_path  # noqa: E402
 from ifenn.run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
 
@@ -42,22 +43,25 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
             (ax_, ay), (bx, by) = notch["start"], notch["end"]
             ax.plot([ax_, bx], [ay, by], color="orange", lw=2.5, ls="--", label="history notch")
     span = max(x1 - x0, y1 - y0)
-    edges = {"left": ((x0, y0), (x0, y1), (-1, 0)), "right": ((x1, y0), (x1, y1), (1, 0)),
-             "bottom": ((x0, y0), (x1, y0), (0, -1)), "top": ((x0, y1), (x1, y1), (0, 1))}
-    for edge, components in scene["boundary"].items():
-        (ax_, ay), (bx, by), (nx_, ny_) = edges[edge]
-        fixed = [c for c, k in components.items() if k == "fixed"]
-        loaded = [c for c, k in components.items() if k == "load"]
-        if fixed:
-            ax.plot([ax_, bx], [ay, by], color="tab:blue", lw=5, alpha=0.5)
-            ax.text((ax_ + bx) / 2 + nx_ * 0.06 * span, (ay + by) / 2 + ny_ * 0.06 * span,
-                    "u" + ",".join(fixed) + " = 0", ha="center", va="center", color="tab:blue", fontsize=8)
-        for c in loaded:
-            dx, dy = (0.06 * span, 0) if c == "x" else (0, 0.06 * span)
-            for t in np.linspace(0.1, 0.9, 5):
+    outward = {"left": (-1, 0), "right": (1, 0), "bottom": (0, -1), "top": (0, 1)}
+    for condition in supports.conditions(scene):
+        (ax_, ay), (bx, by) = condition.start, condition.end
+        nx_, ny_ = outward.get(condition.edge, (0, -1))
+        component = "xy"[condition.component]
+        if condition.kind == "fixed":
+            if condition.is_point:
+                ax.plot([ax_], [ay], marker="^", ms=9, color="tab:blue", alpha=0.7)
+            else:
+                ax.plot([ax_, bx], [ay, by], color="tab:blue", lw=5, alpha=0.5)
+            shift = 0.06 + 0.04 * condition.component
+            ax.text((ax_ + bx) / 2 + nx_ * shift * span, (ay + by) / 2 + ny_ * shift * span,
+                    f"u{component} = 0", ha="center", va="center", color="tab:blue", fontsize=8)
+        else:
+            dx, dy = (0.06 * span, 0) if component == "x" else (0, 0.06 * span)
+            for t in (np.linspace(0.1, 0.9, 5) if not condition.is_point else [0.0]):
                 px, py = ax_ + t * (bx - ax_), ay + t * (by - ay)
                 ax.annotate("", xy=(px + dx, py + dy), xytext=(px, py), arrowprops={"arrowstyle": "->", "color": "tab:green"})
-            ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span, f"u{c} = u",
+            ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span, f"u{component} = u",
                     ha="center", va="center", color="tab:green", fontsize=8)
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=False))
