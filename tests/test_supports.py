@@ -158,6 +158,7 @@ def test_the_schema_takes_parts_and_points_and_the_run_spec_carries_them(quick_c
 
     config = copy.deepcopy(quick_config)
     config["scenes"]["beam"] = copy.deepcopy(BEAM)
+    config["scenes"]["beam"]["elements"] = [32, 8]     # lc/h = 2.4 with the quick lc
     config["fem_runs"]["beam"] = {"scene": "beam", "schedule": "I"}
     checked = validate_config(config, petsc_names=False)
     assert fem_run_spec(checked, "beam")["scene"]["boundary"]["points"][1] == {"at": [1.0, -0.25], "y": "fixed"}

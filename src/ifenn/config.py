@@ -24,6 +24,9 @@ from ifenn.schema import REPO, SCHEMA_PATH, _schema  # noqa: F401 (REPO: for the
 
 EDGES = ("left", "right", "bottom", "top")
 # speed_accuracy: method -> the config section of its runs
+#: the coarsest mesh accepted for a scene: AT2's profile exp(-|x|/lc) over at least two elements a
+#: length scale (the paper's scenes have 6 to 9; the stability sweep probes 3)
+MIN_LC_OVER_H = 2.0
 SPEED_ACCURACY_METHODS = {"fem": "fem_runs", "ifenn": "ifenn_runs", "adaptive": "adaptive_runs"}
 
 
@@ -233,6 +236,22 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
                             f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
                             f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
         problems += supports.problems(scene, key)
+        lc = scene_material(config["material"], scene)["lc"]
+        lc_key = f"{key}.material.lc" if "lc" in scene.get("material", {}) else "material.lc"
+        if lc < MIN_LC_OVER_H * hx:
+            problems.append(f"config key '{lc_key}': lc = {lc:g} mm is {lc / hx:.3g} elements of scene '{name}' "
+                            f"(h = {hx:g} mm); the mesh resolves the phase field from lc/h = {MIN_LC_OVER_H:g} on: "
+                            f"refine the scene's elements to at least {math.ceil(MIN_LC_OVER_H * (x1 - x0) / lc)} across x")
+        if lc >= min(x1 - x0, y1 - y0):
+            problems.append(f"config key '{lc_key}': lc = {lc:g} mm is not smaller than scene '{name}' "
+                            f"({x1 - x0:g} x {y1 - y0:g} mm): the phase field would span the specimen")
+        own = scene.get("material", {})
+        if ("E" in own) != ("nu" in own):
+            problems.append(f"config key '{key}.material': give E and nu together (or lame_lambda and lame_mu), got {sorted(own)}")
+        if ("E" in own) and ({"lame_lambda", "lame_mu"} & set(own)):
+            problems.append(f"config key '{key}.material': give either E and nu or lame_lambda and lame_mu, not both")
+        if ("lame_lambda" in own) != ("lame_mu" in own):
+            problems.append(f"config key '{key}.material': give lame_lambda and lame_mu together, got {sorted(own)}")
         tol = 1e-12 * max(x1 - x0, y1 - y0)
         for i, notch in enumerate(scene.get("notches", [])):
             nkey = f"{key}.notches[{i}]"
@@ -364,6 +383,8 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
         if verification.get("enabled") and setting["predictor"] != "picnn":
             problems.append(f"config key 'ifenn_runs.{name}.verification.enabled': verification checks the PICNN's "
                             f"prediction; it needs predictor 'picnn', got '{setting['predictor']}'")
+        if setting["predictor"] == "picnn" and run["fem_run"] in config["fem_runs"]:
+            problems += _network_material_problems(config, name, run["fem_run"])
         padding = run.get("pixel_padding", config["ifenn"].get("pixel_padding"))
         if verification.get("enabled") and padding not in ("replicate", "zeros"):
             problems.append(f"config key 'ifenn_runs.{name}.pixel_padding': the verified step's pixel equation needs "
@@ -606,11 +627,46 @@ def load_values(schedule: list[dict]) -> list[float]:
     return values
 
 
+def _network_material_problems(config: dict, name: str, fem_run: str) -> list[str]:
+    """The network answers the pixel equation of the material it was trained on (Gc, lc): a run of
+    the network on a scene of another material is refused, naming what differs (the certified pixel
+    step, predictor exact_pixel or an adaptive run, serves any material)."""
+    training_scene = config["scenes"].get(config["fem_runs"].get(config["picnn"]["training_run"], {}).get("scene"))
+    scene = config["scenes"].get(config["fem_runs"][fem_run]["scene"])
+    if training_scene is None or scene is None:
+        return []
+    trained, own = scene_material(config["material"], training_scene), scene_material(config["material"], scene)
+    differs = {k: (trained[k], own[k]) for k in ("Gc", "lc") if not math.isclose(trained[k], own[k], rel_tol=1e-12)}
+    if not differs:
+        return []
+    said = ", ".join(f"{k} {v[1]:g} (network: {v[0]:g})" for k, v in differs.items())
+    return [f"config key 'ifenn_runs.{name}': the network was trained on another material than its scene's: {said}; "
+            "run this scene with predictor 'exact_pixel' or as an adaptive run (the certified pixel step), or train "
+            "the network on it (picnn.training_run)"]
+
+
+def scene_material(material: dict, scene: dict) -> dict:
+    """The material a run of ``scene`` uses: the config's, with the scene's own ``material`` merged
+    over it (E and nu become the Lame pair: lambda = E nu / ((1 + nu)(1 - 2 nu)), mu = E / (2 (1 +
+    nu))), and the scene's ``plane`` and ``thickness`` where it sets them (so a scene that sets none
+    resolves to the config's material exactly)."""
+    resolved = dict(material)
+    own = dict(scene.get("material", {}))
+    if "E" in own and "nu" in own:   # (E alone is refused by the checks)
+        E, nu = own.pop("E"), own.pop("nu")
+        own["lame_lambda"], own["lame_mu"] = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    resolved.update(own)
+    for key in ("plane", "thickness"):
+        if key in scene:
+            resolved[key] = scene[key]
+    return resolved
+
+
 def training_spec(config: dict) -> dict:
     """What the training rules need: the PICNN section, material and the training run's scene
     (its slits cut the loss's stencil, as in every pixel operator)."""
     scene = config["scenes"][config["fem_runs"][config["picnn"]["training_run"]]["scene"]]
-    return {**config["picnn"], "material": config["material"], "scene": scene}
+    return {**config["picnn"], "material": scene_material(config["material"], scene), "scene": scene}
 
 
 def fem_run_spec(config: dict, run: str) -> dict:
@@ -642,7 +698,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
         "name": run,
         "scene_name": entry["scene"],
         "scene": config["scenes"][entry["scene"]],
-        "material": config["material"],
+        "material": scene_material(config["material"], config["scenes"][entry["scene"]]),
         "schedule_name": entry["schedule"],
         **loads,
         "stagger_max_iterations": entry.get("stagger_max_iterations", solver["stagger_max_iterations"]),

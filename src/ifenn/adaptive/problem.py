@@ -97,7 +97,7 @@ class AdaptiveMeshProblem:
         self._nullspace = self._near_nullspace()
         self.u_reduced = PETSc.Vec().createSeq(self.n_free_dofs)
         self.rhs = PETSc.Vec().createSeq(self.n_free_dofs)
-        self._tensile = physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"])
+        self._tensile = physics.tensile_energy_density(self.displacement, material)
         self._psi_expressions = {m: fem.Expression(self._tensile, points) for m, (points, _, _) in self._pixel_centres.items()}
         self._u_expressions = {m: fem.Expression(self.displacement, points) for m, (points, _, _) in self._pixel_centres.items()}
 
@@ -254,7 +254,8 @@ class AdaptiveMeshProblem:
         with self.internal_force.localForm() as local:
             local.set(0.0)
         fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
-        return float((self.P_scipy.T @ self.internal_force.array)[self.loaded_dofs].sum())
+        thickness = self.material.get("thickness", 1.0)   # mm; absent: N per mm of thickness
+        return thickness * float((self.P_scipy.T @ self.internal_force.array)[self.loaded_dofs].sum())
 
     def internal_force_full(self) -> np.ndarray:
         """The internal force f(u) = int g(phi) sigma(u) : eps(v) of every cell, at every node of the

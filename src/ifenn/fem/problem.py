@@ -243,7 +243,7 @@ class FractureProblem:
         self._build_boundary_conditions()
         self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"), petsc.get("displacement_matrix", "aij"))
         self._tensile_energy = fem.Expression(
-            physics.tensile_energy_density(self.displacement, material["lame_lambda"], material["lame_mu"]),
+            physics.tensile_energy_density(self.displacement, material),
             self.quadrature_points,
         )
         self.set_initial_history()
@@ -407,13 +407,14 @@ class FractureProblem:
         self.history.x.array[:] = self.history_previous.x.array
 
     def reaction_force(self) -> float:
-        """Sum of the internal force on the loaded dofs (N per mm of thickness)."""
+        """Sum of the internal force on the loaded dofs times the scene's thickness (``material
+        ["thickness"]``, mm; absent: N per mm of thickness)."""
         with self.internal_force.localForm() as local:
             local.set(0.0)
         fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
         self.internal_force.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         local = float(self.internal_force.array_r[self.loaded_dofs].sum())
-        return self.comm.allreduce(local, op=MPI.SUM)
+        return self.material.get("thickness", 1.0) * self.comm.allreduce(local, op=MPI.SUM)
 
     def max_owned(self, function) -> float:
         n = function.function_space.dofmap.index_map.size_local * function.function_space.dofmap.index_map_bs
