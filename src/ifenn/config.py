@@ -18,6 +18,7 @@ from typing import Any
 import jsonschema
 import yaml
 
+from ifenn import geometry
 from ifenn.fem import supports
 from ifenn.network.settings import resolve_settings
 from ifenn.schema import REPO, SCHEMA_PATH, _schema  # noqa: F401 (REPO: for the benchmarks)
@@ -235,6 +236,7 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
             problems.append(f"config key '{key}.elements': {scene['elements']} on the domain {scene['domain']} gives "
                             f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
                             f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
+        problems += geometry.cutout_problems(scene, key)
         problems += supports.problems(scene, key)
         lc = scene_material(config["material"], scene)["lc"]
         lc_key = f"{key}.material.lc" if "lc" in scene.get("material", {}) else "material.lc"
@@ -482,6 +484,9 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         elif (schedule := config["schedules"].get(fem_runs[entry["fem_run"]]["schedule"])) is not None and schedule_increments(schedule) is None:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
                             "run fixed schedules")
+        elif config["scenes"].get(fem_runs[entry["fem_run"]]["scene"], {}).get("cutouts"):
+            problems.append(f"config key '{key}.fem_run': the scene of '{entry['fem_run']}' has cut-outs, which the adaptive "
+                            "mesh does not take yet; run it as a FEM or an IFENN run")
         ifenn_run = entry.get("ifenn_run")
         if ifenn_run is not None:
             ifenn_runs = config.get("ifenn_runs", {})

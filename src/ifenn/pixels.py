@@ -46,12 +46,16 @@ class PixelGrid:
         """x (nx_px,) and y (ny_px,) coordinates of pixel centres, mm."""
         return (self.x0 + (np.arange(self.nx_px) + 0.5) * self.h_px, self.y0 + (np.arange(self.ny_px) + 0.5) * self.h_px)
 
-    def image_from(self, index: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Scatter values at flat pixel indices into an image; every pixel must be hit once."""
+    def image_from(self, index: np.ndarray, values: np.ndarray, solid: np.ndarray | None = None) -> np.ndarray:
+        """Scatter values at flat pixel indices into an image; every pixel must be hit once, or
+        every pixel of the ``solid`` mask (the others, in a cut-out, are 0)."""
         image = np.full(self.nx_px * self.ny_px, np.nan)
+        if solid is not None:
+            image[~np.ravel(solid)] = 0.0
         image[index] = values
-        if len(index) != image.size or np.isnan(image).any():
-            raise ValueError(f"Gauss points do not cover the {self.shape} pixel grid one-to-one")
+        expected = image.size if solid is None else int(np.count_nonzero(solid))
+        if len(index) != expected or np.isnan(image).any():
+            raise ValueError(f"Gauss points do not cover the {self.shape} pixel grid's solid one-to-one")
         return image.reshape(self.shape)
 
     def attrs(self) -> dict:
@@ -60,6 +64,23 @@ class PixelGrid:
 
 # Boxes on pixel images: (row slice, column slice) with non-negative start and stop.
 Box = tuple[slice, slice]
+
+
+def _stencil_neighbours(shape: tuple[int, int], padding: str):
+    """Per stencil link (dy, dx): pixel indices (iy, ix), its neighbour (jy, jx) as the padding
+    reads it, the weight, and which links exist (replicate: folded onto the edge pixel, none onto
+    the pixel itself; zeros: none beyond the image)."""
+    ny, nx = shape
+    iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+    for dy, dx, weight in STENCIL_LINKS:
+        jy, jx = iy + dy, ix + dx
+        if padding == "replicate":
+            jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
+            valid = (jy != iy) | (jx != ix)
+        else:
+            valid = (jy >= 0) & (jy < ny) & (jx >= 0) & (jx < nx)
+            jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
+        yield iy, ix, jy, jx, weight, valid
 
 
 def grow_box(box: Box, by: int, shape: tuple[int, int]) -> Box:
@@ -119,9 +140,37 @@ class SlitCuts:
 
     @classmethod
     def for_scene(cls, scene: dict, grid: PixelGrid, padding: str = "replicate") -> SlitCuts:
-        """The cuts of ``scene``'s slit notches (config entries of kind 'slit') on ``grid``."""
+        """The cuts of ``scene``'s slit notches (config entries of kind 'slit') on ``grid``, and
+        of its cut-outs (``ifenn.geometry``): every link between a solid pixel and a removed one,
+        those through a cut-out's corner included. The cut-outs' edges are also drawn as slits, so
+        that the coarse multigrid levels (:meth:`coarse_links`) see them at their spacing."""
+        from ifenn import geometry
+
         slits = [(notch["start"], notch["end"]) for notch in scene.get("notches", []) if notch["kind"] == "slit"]
-        return cls.from_slits(grid, slits, padding, scene["domain"])
+        cuts = cls.from_slits(grid, slits, padding, scene["domain"])
+        if not scene.get("cutouts"):
+            return cuts
+        # the coarse levels redraw the cut-outs' edges inside the domain as slits
+        (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+        edges = []
+        for a, b, c, d in geometry.cutouts(scene):
+            edges += [e for e, inside in ((((a, c), (b, c)), c > y0), (((b, c), (b, d)), b < x1),
+                                          (((b, d), (a, d)), d < y1), (((a, d), (a, c)), a > x0)) if inside]
+        source = (grid, tuple(slits) + tuple(edges), scene["domain"])
+        solid = geometry.solid_pixels(scene, grid)
+        rows, cols, weights = [], [], []
+        for iy, ix, jy, jx, weight, valid in _stencil_neighbours(grid.shape, padding):
+            cut = valid & (solid[iy, ix] != solid[jy, jx])
+            rows.append((iy * grid.nx_px + ix)[cut])
+            cols.append((jy * grid.nx_px + jx)[cut])
+            weights.append(np.full(int(cut.sum()), weight))
+        rows, cols, weights = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
+        # a stencil link may be listed twice (folded links of the replicate padding: their weights
+        # add up); a link a slit already cuts is not cut again
+        n = grid.nx_px * grid.ny_px
+        fresh = ~np.isin(rows * n + cols, cuts.rows * n + cuts.cols)
+        return cls(tuple(grid.shape), np.concatenate([cuts.rows, rows[fresh]]).astype(np.int64),
+                   np.concatenate([cuts.cols, cols[fresh]]).astype(np.int64), np.concatenate([cuts.weights, weights[fresh]]), source)
 
     @classmethod
     def from_slits(cls, grid: PixelGrid, slits, padding: str = "replicate", domain: dict | None = None) -> SlitCuts:

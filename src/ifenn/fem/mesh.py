@@ -1,9 +1,11 @@
-"""Structured Q1 meshes of rectangular scenes, with slit notches cut along mesh lines.
+"""Structured Q1 meshes of rectangular scenes, minus their cut-outs, with slit notches cut along
+mesh lines.
 
 A slit is made by duplicating the nodes on the notch's element edges: the elements on
 one side (above a horizontal slit, right of a vertical one) use the twins, so the two
 faces separate under load. Tip nodes inside the domain are shared (not duplicated). This
-is how the paper's meshes are built: 201 x 201 nodes + 60 twins for snt1.
+is how the paper's meshes are built: 201 x 201 nodes + 60 twins for snt1. The cells inside a
+cut-out (``ifenn.geometry``) are left out, and so are the nodes no cell uses.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ifenn import geometry
 from ifenn.io import atomic_path, reading
 
 
@@ -21,9 +24,10 @@ from ifenn.io import atomic_path, reading
 class StructuredMesh:
     """A structured quadrilateral mesh with slit twins.
 
-    points: (n_nodes, 2) coordinates, mm; the first (nx+1)(ny+1) are the grid nodes in
-    row-major order (index j*(nx+1)+i), the twins follow. cells: (nx*ny, 4) node indices
-    in counter-clockwise (VTK/meshio) order, cell (i, j) at row j*nx+i.
+    points: (n_nodes, 2) coordinates, mm; the first ``n_grid_nodes`` are the grid nodes in
+    row-major order (index j*(nx+1)+i without a cut-out), the twins follow. cells: (n_cells, 4)
+    node indices in counter-clockwise (VTK/meshio) order, row-major over the solid cells (cell
+    (i, j) at row j*nx+i without a cut-out).
     """
 
     points: np.ndarray
@@ -33,10 +37,11 @@ class StructuredMesh:
     origin: tuple[float, float]
     h: float
     slits: list[dict] = field(default_factory=list)  # snapped segments and twin counts
+    n_grid_nodes: int = -1   # grid nodes (not twins) kept; -1: all (nx + 1)(ny + 1)
 
-    @property
-    def n_grid_nodes(self) -> int:
-        return (self.nx + 1) * (self.ny + 1)
+    def __post_init__(self) -> None:
+        if self.n_grid_nodes < 0:
+            self.n_grid_nodes = (self.nx + 1) * (self.ny + 1)
 
     def metadata(self) -> dict:
         return {
@@ -116,7 +121,16 @@ def build_mesh(scene: dict) -> StructuredMesh:
         slits.append({"requested": [notch["start"], notch["end"]], "snapped": snapped, "n_twins": int(len(ids))})
     if twins:
         points = np.vstack([points, points[np.concatenate(twins)]])
-    return StructuredMesh(points, cells.astype(np.int64), nx, ny, (x0, y0), h, slits)
+    n_grid_nodes = (nx + 1) * (ny + 1)
+    if scene.get("cutouts"):
+        centres = points[cells].mean(axis=1)
+        cells = cells[~geometry.in_cutout(scene, centres[:, 0], centres[:, 1])]
+        used = np.unique(cells)
+        renumber = np.full(len(points), -1, dtype=np.int64)
+        renumber[used] = np.arange(len(used))
+        points, cells = points[used], renumber[cells]
+        n_grid_nodes = int((used < (nx + 1) * (ny + 1)).sum())
+    return StructuredMesh(points, cells.astype(np.int64), nx, ny, (x0, y0), h, slits, n_grid_nodes)
 
 
 def write_mesh(mesh: StructuredMesh, xdmf_path: str | Path) -> None:

@@ -20,6 +20,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ifenn import geometry
 from ifenn.fem import physics, supports
 from ifenn.pixels import PixelGrid
 
@@ -234,11 +235,14 @@ class FractureProblem:
         self.pixel_of_q_dof = np.empty(self.Q.dofmap.index_map.size_local + self.Q.dofmap.index_map.num_ghosts, dtype=np.int64)
         self.pixel_of_q_dof[self.q_dofs] = self.pixels.pixel_index(gp_coordinates)
         self.owned_q_dofs = self.q_dofs[: self.n_cells_owned].ravel()
+        # the pixels of the solid (a cut-out's pixels have no Gauss point: 0 in every image)
+        self.solid = geometry.solid_pixels(scene, self.pixels) if scene.get("cutouts") else None
         if self.comm.size == 1:  # serial: the image is one gather (the map is one-to-one, checked here)
             index = self.pixel_of_q_dof[self.owned_q_dofs]
-            self.pixels.image_from(index, np.zeros(len(index)))
-            self.q_dof_of_pixel = np.empty(len(index), dtype=np.int64)
+            self.pixels.image_from(index, np.zeros(len(index)), self.solid)
+            self.q_dof_of_pixel = np.empty(self.pixels.nx_px * self.pixels.ny_px, dtype=np.int64)
             self.q_dof_of_pixel[index] = self.owned_q_dofs
+            self._solid_pixel_index = None if self.solid is None else index
 
         self._build_boundary_conditions()
         self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"), petsc.get("displacement_matrix", "aij"))
@@ -423,8 +427,12 @@ class FractureProblem:
     # ------------------------------------------------------------------ pixels
     def pixels_from_gauss_points(self, function) -> np.ndarray | None:
         """Gauss-point field -> (ny_px, nx_px) pixel image on rank 0 (None elsewhere)."""
-        if self.comm.size == 1:   # take(mode="clip"): the indices are valid, and it skips their check
+        if self.comm.size == 1 and self.solid is None:   # take(mode="clip"): the indices are valid, and it skips their check
             return np.take(function.x.array, self.q_dof_of_pixel, mode="clip").reshape(self.pixels.shape)
+        if self.comm.size == 1:
+            image = np.zeros(self.pixels.nx_px * self.pixels.ny_px)
+            image[self._solid_pixel_index] = function.x.array[self.owned_q_dofs]
+            return image.reshape(self.pixels.shape)
         index = self.pixel_of_q_dof[self.owned_q_dofs]
         values = function.x.array[self.owned_q_dofs]
         if self.comm.size > 1:
@@ -433,7 +441,7 @@ class FractureProblem:
                 return None
             index = np.concatenate([g[0] for g in gathered])
             values = np.concatenate([g[1] for g in gathered])
-        return self.pixels.image_from(index, values)
+        return self.pixels.image_from(index, values, self.solid)
 
     def gauss_points_from_pixels(self, image: np.ndarray | None, function) -> None:
         """Pixel image (given on rank 0) -> Gauss-point field on every rank (incl. ghosts)."""

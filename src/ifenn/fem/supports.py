@@ -124,11 +124,33 @@ def problems(scene: dict, key: str) -> list[str]:
     held = conditions(scene, key)
     if not any(c.kind == "load" for c in held):
         found.append(f"config key '{key}.boundary': no support prescribes 'load'; at least one must")
-    free = rigid_body_motions_left(held)
+    # the nodes each condition holds: the mesh's nodes on its part that belong to the solid
+    ends = []
+    for c in held:
+        nodes = _solid_nodes_on(scene, c, h)
+        if len(nodes) == 0:
+            found.append(f"config key '{c.key}': no node of the mesh lies there (it is inside a cut-out)")
+        else:
+            ends.append(Condition(c.key, c.component, c.kind, c.edge, tuple(nodes[0]), tuple(nodes[-1]), c.tolerance))
+    if found:
+        return found
+    free = rigid_body_motions_left(ends)
     if free:
         found.append(f"config key '{key}.boundary': the supports leave a rigid-body motion free ({', '.join(free)}); "
                      "fix more components (a pinned point and a roller, or a fixed edge)")
     return found
+
+
+def _solid_nodes_on(scene: dict, condition: Condition, h: float) -> np.ndarray:
+    """The mesh nodes (n, 2) on a condition's part, or its point, that belong to a solid cell."""
+    from ifenn import geometry
+
+    (ax, ay), (bx, by) = condition.start, condition.end
+    n = int(round(max(abs(bx - ax), abs(by - ay)) / h))
+    t = np.linspace(0.0, 1.0, n + 1)
+    x, y = ax + t * (bx - ax), ay + t * (by - ay)
+    keep = geometry.node_in_solid(scene, x, y, h)
+    return np.column_stack([x[keep], y[keep]])
 
 
 def rigid_body_motions_left(held: list[Condition]) -> list[str]:

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ifenn import geometry  # noqa: E402
 from ifenn.fem import supports  # noqa: E402
 from ifenn.io import atomic_path  # noqa: E402
 from ifenn.run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
@@ -46,7 +47,7 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
     outward = {"left": (-1, 0), "right": (1, 0), "bottom": (0, -1), "top": (0, 1)}
     for condition in supports.conditions(scene):
         (ax_, ay), (bx, by) = condition.start, condition.end
-        nx_, ny_ = outward.get(condition.edge, (0, -1))
+        nx_, ny_ = outward.get(condition.edge, (0, -1) if condition.kind == "fixed" else (0, 1))
         component = "xy"[condition.component]
         if condition.kind == "fixed":
             if condition.is_point:
@@ -63,6 +64,9 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
                 ax.annotate("", xy=(px + dx, py + dy), xytext=(px, py), arrowprops={"arrowstyle": "->", "color": "tab:green"})
             ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span, f"u{component} = u",
                     ha="center", va="center", color="tab:green", fontsize=8)
+    for a, b, c, d in geometry.cutouts(scene):
+        ax.fill([a, b, b, a], [c, c, d, d], facecolor="white", edgecolor="k", hatch="//", lw=1, zorder=5,
+                label="cut-out")
     handles, labels = ax.get_legend_handles_labels()
     unique = dict(zip(labels, handles, strict=False))
     if unique:

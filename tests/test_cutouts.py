@@ -1,0 +1,222 @@
+"""Cut-outs: the domain minus rectangles. The mesh keeps the solid cells (a patch test stays
+exact), every pixel operator cuts the links that leave the solid (no flux into a cut-out, the
+removed pixels hold phi = 0), the certificate still bounds the error, and the config refuses a
+cut-out off the mesh lines."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.linalg
+
+from ifenn import geometry
+from ifenn.fem.mesh import build_mesh
+from ifenn.hybrid.verification import PixelEquation, normalised_residual
+from ifenn.network.picnn import laplacian_matrix, solve_pixel_equation
+from ifenn.pixels import PixelGrid, SlitCuts
+
+GC, LC = 2.7, 0.15
+# an L-shaped panel: the unit square without its upper right quadrant
+L_PANEL = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [20, 20],
+           "cutouts": [{"x": [0.5, 1.0], "y": [0.5, 1.0]}],
+           "boundary": {"bottom": {"x": "fixed", "y": "fixed"}, "points": [{"at": [0.95, 0.5], "y": "load"}]}}
+MATERIAL = {"lame_lambda": 121154.0, "lame_mu": 80770.0, "Gc": GC, "lc": LC, "residual_stiffness": 0.0,
+            "history_notch_B": 1e3}
+
+
+def test_the_mesh_keeps_the_solid_cells_and_their_nodes():
+    mesh = build_mesh(L_PANEL)
+    assert len(mesh.cells) == 400 - 100
+    assert len(mesh.points) == 21 * 21 - 10 * 10 and mesh.n_grid_nodes == len(mesh.points)
+    centres = mesh.points[mesh.cells].mean(axis=1)
+    assert not geometry.in_cutout(L_PANEL, centres[:, 0], centres[:, 1]).any()
+    assert np.isin(np.arange(len(mesh.points)), mesh.cells).all()          # no node without a cell
+    # the re-entrant corner and the cut-out's edges are nodes; the quadrant's inside is not
+    assert (np.abs(mesh.points - [0.5, 0.5]).sum(axis=1) < 1e-12).sum() == 1
+    assert not geometry.in_cutout(L_PANEL, mesh.points[:, 0], mesh.points[:, 1]).any()
+
+
+def test_patch_test_on_a_mesh_with_a_cut_out(quick_config, tmp_path):
+    """Uniaxial plane strain on a square whose right strip is cut out: the solid is a rectangle
+    whose new right edge is free, so the field is linear and Q1 reproduces it to round-off, with
+    the analytic force on the remaining top edge."""
+    from conftest import build_problem
+
+    scene = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [8, 8],
+             "cutouts": [{"x": [0.75, 1.0], "y": [0.0, 1.0]}],
+             "boundary": {"bottom": {"y": "fixed"}, "left": {"x": "fixed"}, "top": {"y": "load"}}}
+    problem, _ = build_problem(scene, MATERIAL, quick_config["solver"]["linear_solver_presets"]["direct"], tmp_path)
+    problem.solve_displacement(1e-3)
+    lam, mu = MATERIAL["lame_lambda"], MATERIAL["lame_mu"]
+    u = problem.displacement.x.array.reshape(-1, 2)
+    x = problem.V.tabulate_dof_coordinates()[:, :2]
+    assert x[:, 0].max() == pytest.approx(0.75)
+    np.testing.assert_allclose(u[:, 1], 1e-3 * x[:, 1], atol=1e-14)
+    np.testing.assert_allclose(u[:, 0], -lam / (lam + 2 * mu) * 1e-3 * x[:, 0], atol=1e-14)
+    assert problem.reaction_force() == pytest.approx((lam + 2 * mu - lam**2 / (lam + 2 * mu)) * 1e-3 * 0.75, rel=1e-10)
+    # the pixel images of the problem: the removed pixels are 0, the solid ones the Gauss points'
+    problem.update_history()
+    image = problem.pixels_from_gauss_points(problem.history)
+    solid = geometry.solid_pixels(scene, problem.pixels)
+    assert (image[~solid] == 0).all() and (image[solid] > 0).all()
+
+
+def test_patch_test_on_an_l_shaped_mesh_with_every_boundary_node_held(quick_config, tmp_path):
+    """Any linear displacement prescribed on every boundary node of the L-shaped mesh (the
+    cut-out's edges and the re-entrant corner included) is reproduced at every inner node."""
+    from conftest import build_problem
+    from dolfinx import fem
+    from dolfinx import mesh as dmesh
+
+    problem, _ = build_problem(L_PANEL, MATERIAL, quick_config["solver"]["linear_solver_presets"]["direct"], tmp_path)
+    linear = fem.Function(problem.V)
+    linear.interpolate(lambda x: np.vstack([1e-3 * (0.3 * x[0] - 0.2 * x[1]), 1e-3 * (0.1 * x[0] + 0.5 * x[1])]))
+    domain = problem.domain
+    domain.topology.create_connectivity(1, 2)
+    facets = dmesh.exterior_facet_indices(domain.topology)
+    dofs = fem.locate_dofs_topological(problem.V, 1, facets)
+    problem.bcs = [fem.dirichletbc(linear, dofs)]
+    problem.solve_displacement(0.0)
+    np.testing.assert_allclose(problem.displacement.x.array, linear.x.array, atol=1e-15)
+    # the cut-out's edges are boundary: the corner (0.5, 0.5) and the edge x = 0.5 above it are held
+    held = problem.V.tabulate_dof_coordinates()[dofs][:, :2]
+    assert (np.abs(held - [0.5, 0.75]).sum(axis=1) < 1e-12).any()
+
+
+def _setup(padding="replicate"):
+    grid = PixelGrid.for_scene(L_PANEL)
+    return grid, SlitCuts.for_scene(L_PANEL, grid, padding), geometry.solid_pixels(L_PANEL, grid)
+
+
+def _history(grid, solid):
+    """A history peak at the re-entrant corner, 0 in the cut-out (no Gauss point there)."""
+    x, y = grid.pixel_centres()
+    xx, yy = np.meshgrid(x, y)
+    peak = 3e3 * np.exp(-((xx - 0.5) ** 2 + (yy - 0.5) ** 2) / 0.01) + 5.0
+    return np.where(solid, peak * (1 + 0.05 * np.random.default_rng(0).random(grid.shape)), 0.0)
+
+
+def test_every_link_that_leaves_the_solid_is_cut():
+    grid, cuts, solid = _setup()
+    flat = solid.ravel()
+    assert (flat[cuts.rows] != flat[cuts.cols]).all()            # only links between the solid and the cut-out
+    pairs = set(zip(cuts.rows.tolist(), cuts.cols.tolist(), strict=True))
+    assert pairs == {(j, i) for i, j in pairs}                      # both directions: symmetric
+    nx = grid.nx_px
+    corner_solid = 19 * nx + 20 + 0                                 # pixel (row 19, col 20): below the corner, solid
+    corner_cut = 20 * nx + 20                                       # pixel (row 20, col 20): the cut-out's corner pixel
+    left_of_corner = 20 * nx + 19                                   # solid, left of it
+    assert solid.ravel()[corner_solid] and not solid.ravel()[corner_cut] and solid.ravel()[left_of_corner]
+    # the diagonal link through the re-entrant corner (19, 19) -> (20, 20) is cut too
+    assert (19 * nx + 19, corner_cut) in pairs
+    # the cut Laplacian has no flux into the cut-out: a field that is 1 in the cut-out, 0 outside
+    phi = (~solid).astype(float)
+    lap = PixelEquation(GC, LC, grid.h_px, "replicate", cuts).residual_on(
+        phi, np.zeros(grid.shape), (slice(0, grid.ny_px), slice(0, grid.nx_px)), normalised=False)
+    np.testing.assert_allclose(lap[solid], 0.0, atol=1e-9)
+
+
+def test_exact_solver_and_certificate_on_a_grid_with_a_cut_out():
+    """The exact pixel solve equals the direct solution of the cut operator (an M-matrix with row
+    sums >= Gc/lc + 2H), is 0 in the cut-out, and max |r| bounds the error of any perturbation."""
+    grid, cuts, solid = _setup()
+    history = _history(grid, solid)
+    exact = solve_pixel_equation(history, GC, LC, grid.h_px, "replicate", rtol=1e-13, cuts=cuts)
+    diffusion = GC * LC / grid.h_px**2
+    system = scipy.sparse.diags(GC / LC + 2 * history.ravel()) - diffusion * (laplacian_matrix(*grid.shape, "replicate") - cuts.matrix())
+    direct = scipy.sparse.linalg.spsolve(system.tocsc(), 2 * history.ravel()).reshape(grid.shape)
+    np.testing.assert_allclose(exact, direct, atol=1e-9)
+    assert np.abs(exact[~solid]).max() < 1e-12
+    off = system - scipy.sparse.diags(system.diagonal())
+    assert off.max() <= 0 and (np.asarray(system.sum(axis=1)).ravel() >= GC / LC + 2 * history.ravel() - 1e-6).all()
+    rng = np.random.default_rng(2)
+    for scale in (1e-3, 1e-2, 0.1):
+        phi = exact + scale * rng.standard_normal(grid.shape)
+        bound = np.abs(normalised_residual(phi, history, GC, LC, grid.h_px, "replicate", cuts)).max()
+        assert np.abs(phi - exact).max() <= bound * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_the_verified_correction_reaches_the_cut_solution(compiled, monkeypatch):
+    import ifenn.hybrid.verification as verification
+
+    if not compiled:
+        monkeypatch.setattr(verification, "_kernel", lambda: None)
+    elif verification._kernel() is None:
+        pytest.skip("no C++ compiler: the compiled kernel is not built here")
+    grid, cuts, solid = _setup()
+    history = _history(grid, solid)
+    exact = solve_pixel_equation(history, GC, LC, grid.h_px, "replicate", rtol=1e-13, cuts=cuts)
+    equation = PixelEquation(GC, LC, grid.h_px, "replicate", cuts)
+    box = (slice(0, grid.ny_px), slice(0, grid.nx_px))
+    phi = 2 * history / (GC / LC + 2 * history)
+    worst, iterations = equation.solve_box(phi, history, box, target=1e-6)
+    assert worst <= 1e-6 and iterations > 0
+    assert np.abs(phi - exact).max() <= 2e-6
+
+
+@pytest.mark.parametrize("cutout, message", [
+    ({"x": [0.52, 1.0], "y": [0.5, 1.0]}, "not on mesh lines"),
+    ({"x": [0.5, 1.5], "y": [0.5, 1.0]}, "outside the domain"),
+    ({"x": [0.0, 1.0], "y": [0.0, 1.0]}, "removes the whole domain"),
+])
+def test_a_cut_out_off_the_mesh_lines_is_refused(quick_config, cutout, message):
+    from ifenn.config import ConfigError, validate_config
+
+    config = copy.deepcopy(quick_config)
+    config["scenes"]["panel"] = {**copy.deepcopy(L_PANEL), "cutouts": [cutout],
+                                 "boundary": {"bottom": {"x": "fixed", "y": "fixed"}, "top": [{"range": [0.0, 0.25], "y": "load"}]}}
+    config["fem_runs"]["panel"] = {"scene": "panel", "schedule": "I"}
+    with pytest.raises(ConfigError, match=message) as info:
+        validate_config(config, petsc_names=False)
+    assert "config key 'scenes.panel.cutouts[0]'" in str(info.value)
+
+
+def test_a_support_inside_a_cut_out_is_refused_and_the_l_panel_passes(quick_config):
+    from ifenn.config import ConfigError, validate_config
+
+    config = copy.deepcopy(quick_config)
+    config["scenes"]["panel"] = copy.deepcopy(L_PANEL)
+    config["fem_runs"]["panel"] = {"scene": "panel", "schedule": "I"}
+    validate_config(config, petsc_names=False)
+    config["scenes"]["panel"]["boundary"]["points"] = [{"at": [0.75, 0.75], "y": "load"}]
+    with pytest.raises(ConfigError, match="inside a cut-out"):
+        validate_config(config, petsc_names=False)
+
+
+def test_an_l_panel_runs_and_the_exact_pixel_step_follows_fem(quick_config, tmp_path):
+    """A quick L-panel end to end: FEM on the mesh without the quadrant, and the exact pixel
+    step over the whole load path (the cut-out cut out of its operator) reach FEM's peak to 1 %
+    and keep phi = 0 in the cut-out."""
+    import pandas as pd
+
+    from ifenn.config import fem_run_spec, ifenn_run_spec, validate_config
+    from ifenn.fem.mesh import write_mesh
+    from ifenn.fem.solver import run_fem
+    from ifenn.hybrid.runs import run_ifenn
+    from ifenn.run_files import read_phase_field_maps
+
+    config = copy.deepcopy(quick_config)
+    config["scenes"]["l-panel"] = {**copy.deepcopy(L_PANEL), "elements": [20, 20]}
+    # pulled at the top, held at the leg's foot: the re-entrant corner concentrates the stress
+    config["scenes"]["l-panel"]["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "top": {"y": "load"}}
+    config["scenes"]["l-panel"]["material"] = {"lc": 0.1}        # lc/h = 2: the test's coarsest
+    config["schedules"]["lp"] = [{"increments": 60, "step": 1.0e-3}]
+    config["fem_runs"]["l-panel"] = {"scene": "l-panel", "schedule": "lp"}
+    config["ifenn_runs"]["l-panel-exact"] = {"fem_run": "l-panel", "predictor": "exact_pixel", "smoothing_sigma": None,
+                                             "switch_over": "start"}
+    config = validate_config(config, petsc_names=False)
+    spec = fem_run_spec(config, "l-panel")
+    write_mesh(build_mesh(spec["scene"]), tmp_path / "mesh.xdmf")
+    fem = pd.DataFrame(run_fem(spec, tmp_path / "mesh.xdmf", tmp_path / "fem", progress=False))
+    exact = pd.DataFrame(run_ifenn(ifenn_run_spec(config, "l-panel-exact"), tmp_path / "mesh.xdmf", None, None,
+                                   tmp_path / "exact", progress=False))
+    assert fem.reaction_force.max() > 2 * fem.reaction_force.iloc[0] and fem.reaction_force.iloc[-1] < 0.5 * fem.reaction_force.max()
+    assert exact.reaction_force.max() == pytest.approx(fem.reaction_force.max(), rel=0.01)
+    maps, _ = read_phase_field_maps(tmp_path / "exact" / "fields.h5")
+    solid = geometry.solid_pixels(config["scenes"]["l-panel"], PixelGrid.for_scene(config["scenes"]["l-panel"]))
+    _, phi = maps[max(maps)]
+    assert np.abs(phi[~solid]).max() < 1e-9 and phi[solid].max() > 0.9
