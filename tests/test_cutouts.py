@@ -220,3 +220,53 @@ def test_an_l_panel_runs_and_the_exact_pixel_step_follows_fem(quick_config, tmp_
     solid = geometry.solid_pixels(config["scenes"]["l-panel"], PixelGrid.for_scene(config["scenes"]["l-panel"]))
     _, phi = maps[max(maps)]
     assert np.abs(phi[~solid]).max() < 1e-9 and phi[solid].max() > 0.9
+
+
+SEGMENT = {"from": [0.85, 0.5], "to": [0.95, 0.5], "y": "load"}
+
+
+@pytest.mark.parametrize("segment, message", [
+    ({"from": [0.5, 0.25], "to": [0.7, 0.25], "y": "load"}, "must lie on the solid's boundary"),   # inside the solid
+    ({"from": [0.6, 0.75], "to": [0.7, 0.75], "y": "load"}, "must lie on the solid's boundary"),   # inside the cut-out
+    ({"from": [0.6, 0.4], "to": [0.7, 0.5], "y": "load"}, "horizontal or vertical"),
+    ({"from": [0.62, 0.5], "to": [0.7, 0.5], "y": "load"}, "must lie on mesh nodes"),
+])
+def test_a_segment_off_the_solid_boundary_is_refused(quick_config, segment, message):
+    from ifenn.config import ConfigError, validate_config
+
+    config = copy.deepcopy(quick_config)
+    config["scenes"]["panel"] = copy.deepcopy(L_PANEL)
+    config["scenes"]["panel"]["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "segments": [segment]}
+    config["fem_runs"]["panel"] = {"scene": "panel", "schedule": "I"}
+    with pytest.raises(ConfigError, match=message) as info:
+        validate_config(config, petsc_names=False)
+    assert "config key 'scenes.panel.boundary.segments[0]'" in str(info.value)
+    config["scenes"]["panel"]["boundary"]["segments"] = [SEGMENT]
+    validate_config(config, petsc_names=False)
+
+
+def test_a_load_on_a_cut_out_edge_is_balanced_by_the_support(quick_config, tmp_path):
+    """The L-panel pulled up on a short segment of its arm's lower edge (the cut-out's edge): the
+    segment's nodes carry the load, and the fixed foot's reaction balances it (equilibrium)."""
+    import dolfinx.fem.petsc as fem_petsc
+    import ufl
+    from dolfinx import fem
+
+    from conftest import build_problem
+    from ifenn.fem import physics
+
+    scene = copy.deepcopy(L_PANEL)
+    scene["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "segments": [SEGMENT]}
+    problem, _ = build_problem(scene, MATERIAL, quick_config["solver"]["linear_solver_presets"]["direct"], tmp_path)
+    coordinates = problem.V.tabulate_dof_coordinates()[:, :2]
+    loaded = coordinates[problem.loaded_dofs // 2]
+    assert len(loaded) == 3 and np.allclose(loaded[:, 1], 0.5) and np.allclose(sorted(loaded[:, 0]), [0.85, 0.9, 0.95])
+    problem.solve_displacement(1e-3)
+    v = ufl.TestFunction(problem.V)
+    forces = fem_petsc.assemble_vector(fem.form(physics.equilibrium_form(problem.displacement, v, problem.phase_field_gp, MATERIAL)
+                                                * problem.dx)).array.reshape(-1, 2)
+    foot = np.abs(coordinates[:, 1]) < 1e-12
+    load = problem.reaction_force()
+    assert load > 0
+    assert forces[foot, 1].sum() == pytest.approx(-load, rel=1e-8)
+    assert abs(forces[foot, 0].sum()) < 1e-8 * load

@@ -8,7 +8,10 @@ A scene's ``boundary`` maps
   of the edge whose coordinate along it (x on bottom and top, y on left and right) lies in
   [a, b];
 - ``points`` to a list ``[{at: [x, y], x: ..., y: ...}]``: the condition on one mesh node (a pinned
-  support fixes x and y, a roller one of them, a point load prescribes ``load``).
+  support fixes x and y, a roller one of them, a point load prescribes ``load``);
+- ``segments`` to a list ``[{from: [x, y], to: [x, y], x: ..., y: ...}]``: the condition on a
+  horizontal or vertical segment of the solid's boundary that is not on the domain's edges (the
+  edge of a cut-out: the L-panel's load).
 
 ``fixed`` holds the component at zero, ``load`` prescribes it to the load of the increment (mm).
 The reaction force a run reports is the sum of the internal forces on the loaded dofs in their
@@ -76,6 +79,12 @@ def conditions(scene: dict, key: str = "scene") -> list[Condition]:
                 found += [Condition(f"{key}.boundary.points[{i}]", COMPONENTS[c], kind, None, at, at, tol)
                           for c, kind in point.items() if c in COMPONENTS]
             continue
+        if edge == "segments":
+            for i, segment in enumerate(spec):
+                start, end = tuple(map(float, segment["from"])), tuple(map(float, segment["to"]))
+                found += [Condition(f"{key}.boundary.segments[{i}]", COMPONENTS[c], kind, "segment", start, end, tol)
+                          for c, kind in segment.items() if c in COMPONENTS]
+            continue
         parts = spec if isinstance(spec, list) else [dict(spec)]
         for i, part in enumerate(parts):
             start, end = _edge_segment(edge, scene["domain"], part.get("range"))
@@ -99,6 +108,9 @@ def problems(scene: dict, key: str) -> list[str]:
     h = (x1 - x0) / nx
     found = []
     for edge, spec in scene["boundary"].items():
+        if edge == "segments":
+            found += _segment_problems(scene, spec, key, h)
+            continue
         if edge == "points" or not isinstance(spec, list):
             continue
         low, high = (x0, x1) if edge in ("bottom", "top") else (y0, y1)
@@ -138,6 +150,39 @@ def problems(scene: dict, key: str) -> list[str]:
     if free:
         found.append(f"config key '{key}.boundary': the supports leave a rigid-body motion free ({', '.join(free)}); "
                      "fix more components (a pinned point and a roller, or a fixed edge)")
+    return found
+
+
+def _segment_problems(scene: dict, segments: list[dict], key: str, h: float) -> list[str]:
+    """Segments must be horizontal or vertical, end on mesh nodes inside the domain, and lie on the
+    solid's boundary: solid on exactly one side all along."""
+    from ifenn import geometry
+
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    found = []
+    for i, segment in enumerate(segments):
+        skey = f"config key '{key}.boundary.segments[{i}]'"
+        (ax, ay), (bx, by) = segment["from"], segment["to"]
+        if (abs(ax - bx) > 1e-12) == (abs(ay - by) > 1e-12):
+            found.append(f"{skey}: from {segment['from']} to {segment['to']} must be a horizontal or vertical segment of length > 0")
+            continue
+        if not all(x0 - 1e-12 <= x <= x1 + 1e-12 for x in (ax, bx)) or not all(y0 - 1e-12 <= y <= y1 + 1e-12 for y in (ay, by)):
+            found.append(f"{skey}: it reaches outside the domain x in [{x0}, {x1}], y in [{y0}, {y1}]")
+            continue
+        if not all(_on_grid(v, o, h) for v, o in ((ax, x0), (bx, x0), (ay, y0), (by, y0))):
+            found.append(f"{skey}: its ends must lie on mesh nodes (every {h:g} mm from ({x0:g}, {y0:g})); it is not snapped")
+            continue
+        n = int(round(max(abs(bx - ax), abs(by - ay)) / h))
+        t = (np.arange(n) + 0.5) / n
+        mx, my = ax + t * (bx - ax), ay + t * (by - ay)   # the midpoints of its element edges
+        dx, dy = (0.0, 0.5 * h) if abs(ay - by) <= 1e-12 else (0.5 * h, 0.0)
+        def solid(x, y):
+            inside = (x > x0) & (x < x1) & (y > y0) & (y < y1)
+            return inside & ~geometry.in_cutout(scene, x, y)
+
+        if not (solid(mx - dx, my - dy) ^ solid(mx + dx, my + dy)).all():
+            found.append(f"{skey}: it must lie on the solid's boundary (an edge of a cut-out or of the domain), "
+                         "with material on one side only all along")
     return found
 
 
@@ -188,6 +233,8 @@ def anchor_points(scene: dict) -> list[tuple[float, float]]:
     for edge, spec in scene["boundary"].items():
         if edge == "points":
             found += [(float(p["at"][0]), float(p["at"][1])) for p in spec]
+        elif edge == "segments":
+            found += [tuple(map(float, s["from"])) for s in spec] + [tuple(map(float, s["to"])) for s in spec]
         elif isinstance(spec, list):
             for part in spec:
                 start, end = _edge_segment(edge, scene["domain"], part["range"])
