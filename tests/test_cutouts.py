@@ -250,9 +250,9 @@ def test_a_load_on_a_cut_out_edge_is_balanced_by_the_support(quick_config, tmp_p
     segment's nodes carry the load, and the fixed foot's reaction balances it (equilibrium)."""
     import dolfinx.fem.petsc as fem_petsc
     import ufl
+    from conftest import build_problem
     from dolfinx import fem
 
-    from conftest import build_problem
     from ifenn.fem import physics
 
     scene = copy.deepcopy(L_PANEL)
