@@ -270,3 +270,18 @@ def test_a_load_on_a_cut_out_edge_is_balanced_by_the_support(quick_config, tmp_p
     assert load > 0
     assert forces[foot, 1].sum() == pytest.approx(-load, rel=1e-8)
     assert abs(forces[foot, 0].sum()) < 1e-8 * load
+
+
+def test_the_l_panel_specimen_is_config_and_its_measurement_must_exist(paper_config, quick_config):
+    """The paper config's L-panel: a cut-out, a segment load on its edge, plane stress, 100 mm, its
+    own concrete; E and nu give the Lame pair of the published study (6.16 and 10.95 kN/mm^2); its
+    measured curve lies in data/ and a missing file is refused by key."""
+    from ifenn.config import ConfigError, fem_run_spec, validate_config
+
+    material = fem_run_spec(paper_config, "l-panel")["material"]
+    assert material["lame_lambda"] == pytest.approx(6161.3, rel=1e-4) and material["lame_mu"] == pytest.approx(10953.4, rel=1e-4)
+    assert material["plane"] == "stress" and material["thickness"] == 100.0
+    config = copy.deepcopy(quick_config)
+    config["specimens"]["l-panel"]["measured"]["file"] = "data/missing.csv"
+    with pytest.raises(ConfigError, match="specimens.l-panel.measured.file"):
+        validate_config(config, petsc_names=False)

@@ -53,8 +53,12 @@ def test_quick_profile_runs_end_to_end(quick_workflow):
     assert set(timing.method) == {"fem", "ifenn"}
     for figure in ("training/training_data.png", "training/training.png", "paper/views_3d.png", "paper/mesh_study.png",
                    "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png",
-                   "speed_accuracy.png", "stability_map.png"):
+                   "speed_accuracy.png", "stability_map.png", "specimens/l-panel.png"):
         assert (results / "figures" / figure).stat().st_size > 10_000, figure
+    # the field's L-panel (a cut-out, a load on the cut-out's edge, plane stress, 100 mm thick): its
+    # force in N peaks and falls as the panel cracks
+    panel = pd.read_csv(results / "fem" / "l-panel" / "history.csv")
+    assert panel.reaction_force.max() > 1000 and panel.reaction_force.iloc[-1] < 0.2 * panel.reaction_force.max()
     # the numbers the docs quote come from this run: results/summary.md renders its tables and machine
     summary = (results / "summary.md").read_text()
     speed = pd.read_csv(results / "tables" / "speed_accuracy.csv")

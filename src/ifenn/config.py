@@ -371,6 +371,12 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
         if bad:
             problems.append(f"config key 'stability.steps': steps {bad} give outside 1..100000 increments to u_end = {sweep['u_end']}")
     problems += _switch_over_problems(config)
+    for name, specimen in config.get("specimens", {}).items():
+        for run in specimen["fem_runs"]:
+            if run not in config["fem_runs"]:
+                problems.append(f"config key 'specimens.{name}.fem_runs': '{run}' is not a FEM run; allowed: {sorted(config['fem_runs'])}")
+        if not (REPO / specimen["measured"]["file"]).is_file():
+            problems.append(f"config key 'specimens.{name}.measured.file': no file {specimen['measured']['file']} in the repository")
     problems += _reference_convergence_problems(config)
     for name, run in config.get("ifenn_runs", {}).items():
         if run["fem_run"] not in config["fem_runs"]:

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn.config import (ConfigError, adaptive_run_spec, adaptive_shared_prefix, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
-                          paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
+                          paired_runs, scene_material, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
                           validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
@@ -116,7 +116,7 @@ def fem_priority(wildcards):
 
 def lc_over_h(fem_run):
     scene = config["scenes"][config["fem_runs"][fem_run]["scene"]]
-    return config["material"]["lc"] / ((scene["domain"]["x"][1] - scene["domain"]["x"][0]) / scene["elements"][0])
+    return scene_material(config["material"], scene)["lc"] / ((scene["domain"]["x"][1] - scene["domain"]["x"][0]) / scene["elements"][0])
 
 
 def fem_ranks(wildcards):

@@ -95,6 +95,45 @@ def force_displacement_figure(curves: dict, path, title: str = "", u_max: float 
     _save(fig, path)
 
 
+def specimen_figure(curves: dict, measured, measured_label: str, phi_maps: dict, attrs: dict, scene: dict,
+                    path, title: str = "") -> None:
+    """A specimen against its measurement: left, the force of each run (``curves``: label ->
+    history frame, forces in the scene's units) over the measured curve (``measured``: columns
+    displacement_mm and the force); right, phi of the first run at three load levels (``phi_maps``:
+    increment -> (u, image), ``attrs``: the pixel grid), the scene's cut-outs blanked."""
+    from ifenn import geometry
+    from ifenn.pixels import PixelGrid
+
+    unit = "N" if "thickness" in scene else "N/mm"
+    fig = plt.figure(figsize=(15, 4.2))
+    grid = fig.add_gridspec(1, 4, width_ratios=[1.4, 1, 1, 1])
+    ax = fig.add_subplot(grid[0])
+    force = [c for c in measured.columns if c != "displacement_mm"][0]
+    ax.plot(measured["displacement_mm"], measured[force], "k.", ms=4, label=measured_label)
+    for label, frame in curves.items():
+        ax.plot(frame["u"], frame["reaction_force"], lw=1.4, label=label)
+    ax.set_xlabel("displacement of the load (mm)")
+    ax.set_ylabel(f"force ({unit})")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title)
+    increments = sorted(phi_maps)
+    if increments:
+        pixel_grid = PixelGrid(float(attrs["x0"]), float(attrs["y0"]), float(attrs["h_px"]), int(attrs["nx_px"]), int(attrs["ny_px"]))
+        solid = geometry.solid_pixels(scene, pixel_grid)
+        (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+        picks = [increments[len(increments) // 3], increments[2 * len(increments) // 3], increments[-1]]
+        for k, increment in enumerate(picks):
+            u, phi = phi_maps[increment]
+            axis = fig.add_subplot(grid[k + 1])
+            image = axis.imshow(np.where(solid, phi, np.nan), origin="lower", extent=[x0, x1, y0, y1], vmin=0, vmax=1, cmap="magma_r")
+            axis.set_title(f"phi at u = {u:.4g} mm", fontsize=9)
+            axis.set_xticks([])
+            axis.set_yticks([])
+        fig.colorbar(image, ax=axis, fraction=0.046)
+    _save(fig, path)
+
+
 def _gauss_point_coordinates(data: dict) -> tuple[np.ndarray, np.ndarray]:
     """Coordinates (mm) of the Gauss point behind each pixel: in element (i, j) of size
     h = 2 h_px the 2x2 points sit at (i + 1/2 -+ 1/(2 sqrt 3)) h, the lower one in the even pixel."""
