@@ -182,11 +182,19 @@ class AdaptiveMeshProblem:
         (ifenn.fem.supports), selected among the free nodes by their coordinates: the run makes the
         ends of parts and the points nodes of the mesh (supports.anchor_cells)."""
         x = self.free_coordinates
-        fixed, loaded = [], []
+        fixed, loaded, signs = [], [], []
         for condition in supports.conditions(self.scene):
             dofs = 2 * np.flatnonzero(condition.selects(x[:, 0], x[:, 1])) + condition.component
-            (loaded if condition.kind == "load" else fixed).append(dofs)
-        self.loaded_dofs = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int64)
+            if condition.kind in supports.LOADS:
+                loaded.append(dofs)
+                signs.append(np.full(len(dofs), supports.LOADS[condition.kind]))
+            else:
+                fixed.append(dofs)
+        if loaded:
+            self.loaded_dofs, first = np.unique(np.concatenate(loaded), return_index=True)
+            self.load_sign = np.concatenate(signs)[first]   # +1 pulled, -1 pushed the other way ("-load")
+        else:
+            self.loaded_dofs, self.load_sign = np.empty(0, dtype=np.int64), np.empty(0)
         fixed = np.unique(np.concatenate(fixed)) if fixed else np.empty(0, dtype=np.int64)
         self.fixed_dofs = np.setdiff1d(fixed, self.loaded_dofs)
         self.prescribed = np.concatenate([self.fixed_dofs, self.loaded_dofs]).astype(PETSc.IntType)
@@ -232,7 +240,7 @@ class AdaptiveMeshProblem:
         self.K_reduced.setNearNullSpace(self._nullspace)
         prescribed = self.u_reduced.duplicate()
         prescribed.set(0.0)
-        prescribed.setValues(self.loaded_dofs.astype(PETSc.IntType), np.full(len(self.loaded_dofs), load))
+        prescribed.setValues(self.loaded_dofs.astype(PETSc.IntType), load * self.load_sign)
         prescribed.assemble()
         self.rhs.set(0.0)
         self.K_reduced.zeroRowsColumns(self.prescribed, 1.0, prescribed, self.rhs)
@@ -255,7 +263,7 @@ class AdaptiveMeshProblem:
             local.set(0.0)
         fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
         thickness = self.material.get("thickness", 1.0)   # mm; absent: N per mm of thickness
-        return thickness * float((self.P_scipy.T @ self.internal_force.array)[self.loaded_dofs].sum())
+        return thickness * float((self.P_scipy.T @ self.internal_force.array)[self.loaded_dofs] @ self.load_sign)
 
     def internal_force_full(self) -> np.ndarray:
         """The internal force f(u) = int g(phi) sigma(u) : eps(v) of every cell, at every node of the

@@ -260,8 +260,9 @@ class FractureProblem:
         fdim = tdim - 1
         self.domain.topology.create_connectivity(0, tdim)
         self.load = fem.Constant(self.domain, PETSc.ScalarType(0.0))
+        self.load_reversed = fem.Constant(self.domain, PETSc.ScalarType(0.0))   # "-load": pushed the other way
         zero = fem.Constant(self.domain, PETSc.ScalarType(0.0))
-        self.bcs, loaded = [], []
+        self.bcs, loaded, signs = [], [], []
         n_owned = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
         for condition in supports.conditions(self.scene):
             def marker(x, condition=condition):
@@ -273,12 +274,20 @@ class FractureProblem:
                 entities, dim = dmesh.locate_entities_boundary(self.domain, fdim, marker), fdim
             sub = self.V.sub(condition.component)
             dofs = fem.locate_dofs_topological(sub, dim, entities)
-            self.bcs.append(fem.dirichletbc(self.load if condition.kind == "load" else zero, dofs, sub))
-            if condition.kind == "load":
+            value = {"load": self.load, "-load": self.load_reversed}.get(condition.kind, zero)
+            self.bcs.append(fem.dirichletbc(value, dofs, sub))
+            if condition.kind in supports.LOADS:
                 loaded.append(dofs)
-        loaded = np.unique(np.concatenate(loaded)) if loaded else np.empty(0, dtype=np.int32)
+                signs.append(np.full(len(dofs), supports.LOADS[condition.kind]))
+        if loaded:
+            loaded, first = np.unique(np.concatenate(loaded), return_index=True)
+            sign = np.concatenate(signs)[first]
+        else:
+            loaded, sign = np.empty(0, dtype=np.int32), np.empty(0)
         self._loaded_dofs_with_ghosts = loaded
         self.loaded_dofs = loaded[loaded < n_owned]
+        #: +1 on dofs pulled by the load, -1 on those pushed the other way ("-load")
+        self.load_sign = sign[loaded < n_owned]
 
     def _build_equilibrium(self, options: dict, reuse: dict | None = None, matrix_type: str = "aij") -> None:
         """Forms, matrix and KSP of the displacement solve. ``reuse`` (a preset's
@@ -337,6 +346,7 @@ class FractureProblem:
     def solve_displacement(self, load_value: float) -> int:
         """Assemble and solve equilibrium with the current phase_field_gp; returns iterations."""
         self.load.value = load_value
+        self.load_reversed.value = -load_value
         if self.reuse is None:
             self.A_u.zeroEntries()
             fem_petsc.assemble_matrix(self.A_u, self.equilibrium_form, bcs=self.bcs)
@@ -417,7 +427,7 @@ class FractureProblem:
             local.set(0.0)
         fem_petsc.assemble_vector(self.internal_force, self.internal_force_form)
         self.internal_force.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        local = float(self.internal_force.array_r[self.loaded_dofs].sum())
+        local = float(self.internal_force.array_r[self.loaded_dofs] @ self.load_sign)
         return self.material.get("thickness", 1.0) * self.comm.allreduce(local, op=MPI.SUM)
 
     def max_owned(self, function) -> float:

@@ -13,9 +13,10 @@ A scene's ``boundary`` maps
   horizontal or vertical segment of the solid's boundary that is not on the domain's edges (the
   edge of a cut-out: the L-panel's load).
 
-``fixed`` holds the component at zero, ``load`` prescribes it to the load of the increment (mm).
-The reaction force a run reports is the sum of the internal forces on the loaded dofs in their
-loaded direction (N per mm of thickness). Every part and point lies on mesh nodes: the checks
+``fixed`` holds the component at zero, ``load`` prescribes it to the load of the increment (mm),
+``-load`` to minus the load (a beam pushed down). The reaction force a run reports is the sum of
+the internal forces on the loaded dofs in their loaded direction (N per mm of thickness, times the
+scene's thickness). Every part and point lies on mesh nodes: the checks
 refuse one that does not (never snapped silently), and a set of supports that leaves a rigid-body
 motion free (:func:`problems`).
 
@@ -31,6 +32,8 @@ import numpy as np
 
 EDGES = ("left", "right", "bottom", "top")
 COMPONENTS = {"x": 0, "y": 1}
+#: the kinds that follow the load, with the sign of the prescribed displacement
+LOADS = {"load": 1.0, "-load": -1.0}
 
 
 @dataclass(frozen=True)
@@ -39,7 +42,7 @@ class Condition:
 
     key: str                      # the config key it comes from, for messages
     component: int                # 0: x, 1: y
-    kind: str                     # "fixed" or "load"
+    kind: str                     # "fixed", "load" or "-load"
     edge: str | None              # the edge it lies on; None for a point
     start: tuple[float, float]    # the part's ends (a point: both the point), mm
     end: tuple[float, float]
@@ -134,7 +137,7 @@ def problems(scene: dict, key: str) -> list[str]:
     if found:
         return found
     held = conditions(scene, key)
-    if not any(c.kind == "load" for c in held):
+    if not any(c.kind in LOADS for c in held):
         found.append(f"config key '{key}.boundary': no support prescribes 'load'; at least one must")
     # the nodes each condition holds: the mesh's nodes on its part that belong to the solid
     ends = []

@@ -58,11 +58,13 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
             ax.text((ax_ + bx) / 2 + nx_ * shift * span, (ay + by) / 2 + ny_ * shift * span,
                     f"u{component} = 0", ha="center", va="center", color="tab:blue", fontsize=8)
         else:
-            dx, dy = (0.06 * span, 0) if component == "x" else (0, 0.06 * span)
+            sign = -1.0 if condition.kind == "-load" else 1.0
+            dx, dy = (sign * 0.06 * span, 0) if component == "x" else (0, sign * 0.06 * span)
             for t in (np.linspace(0.1, 0.9, 5) if not condition.is_point else [0.0]):
                 px, py = ax_ + t * (bx - ax_), ay + t * (by - ay)
                 ax.annotate("", xy=(px + dx, py + dy), xytext=(px, py), arrowprops={"arrowstyle": "->", "color": "tab:green"})
-            ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span, f"u{component} = u",
+            ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span,
+                    f"u{component} = {'-' if sign < 0 else ''}u",
                     ha="center", va="center", color="tab:green", fontsize=8)
     for a, b, c, d in geometry.cutouts(scene):
         ax.fill([a, b, b, a], [c, c, d, d], facecolor="white", edgecolor="k", hatch="//", lw=1, zorder=5,
