@@ -317,9 +317,11 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
             assert abs(row.peak_error_vs_fine_pct) < 0.5 and row.post_peak_rms_vs_fine_pct < 0.6 * fem.post_peak_rms_vs_fine_pct
     uniform, exact, verified = table.loc["snt1-II"], table.loc["snt1-II-adaptive"], table.loc["snt1-II-adaptive-verified"]
     shear, shear_uniform = table.loc["snt-shear-adaptive"], table.loc["snt-shear"]
-    uncapped = table.loc["snt-shear-adaptive-verified-uncapped"]   # the verified step on FEM's (uncapped) equation
+    # the verified step certifies FEM's (uncapped) equation by default; the capped variant is named
+    uncapped, capped = table.loc["snt-shear-adaptive-verified"], table.loc["snt-shear-adaptive-verified-capped"]
     assert shear.post_peak_rms_vs_fine_pct < shear_uniform.post_peak_rms_vs_fine_pct
     assert uncapped.post_peak_rms_vs_fine_pct < shear_uniform.post_peak_rms_vs_fine_pct and abs(uncapped.peak_error_vs_fine_pct) < 0.5
+    assert abs(capped.peak_error_vs_fine_pct) < 0.5
     for row in (exact, verified, shear):
         assert abs(row.peak_error_vs_fine_pct) < 0.5 and row.post_peak_rms_vs_fine_pct < 1.0
         assert row.post_peak_rms_vs_fine_pct < uniform.post_peak_rms_vs_fine_pct

@@ -107,7 +107,7 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
         warm_start = verification["warm_start"]
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"],
-                    warm_start, spec["history_cap"], verification.get("cap_history", True))
+                    warm_start, spec["history_cap"], verification.get("cap_history", False))
         if verified_step_backend(device) == "torch":   # the whole step on the device (ifenn.hybrid.device_step)
             from ifenn.device import resolve_device
             from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference

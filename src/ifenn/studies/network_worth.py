@@ -163,23 +163,23 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
     equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
     settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"])
     if variant == "no network":
-        step = VerifiedInference(None, equation, *settings, "previous", spec["history_cap"], verification.get("cap_history", True))
+        step = VerifiedInference(None, equation, *settings, "previous", spec["history_cap"], verification.get("cap_history", False))
     elif variant.startswith("paper's network"):
         if variant == "paper's network":
             run = {**spec, "process_zone": {**spec["process_zone"], "tolerance": verification["network_tolerance"]}}
         else:
             run = {**spec, "inference": "full", "evaluation": "orbit"}
         network = _network_inference(run, model_path, h_px, start.shape, "cpu")
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
+        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
     elif variant == "change network":
         from ifenn.network.change_net import ChangeNetWarmStart
 
         network = ChangeNetWarmStart(change_net, Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
+        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
         network.verified = step
     elif variant == "extrapolation":
         network = _Extrapolation()
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", True))
+        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
         network.verified = step
     else:
         zone_of = None
@@ -190,7 +190,7 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
             tolerance = variant.removeprefix("oracle in the zone").strip()
             zone_of = _Zone(float(tolerance) if tolerance else verification["network_tolerance"], Gc / lc, radius)
         step = VerifiedInference(_Oracle(exact, zone_of), equation, *settings, "network", spec["history_cap"],
-                                 verification.get("cap_history", True))
+                                 verification.get("cap_history", False))
     step.start_from(start)
     rows = []
     for k, image in enumerate(images):
@@ -210,7 +210,7 @@ def exact_solutions(spec: dict, h_px: float, images: list) -> list:
     from ifenn.network.picnn import solve_pixel_equation
 
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
-    cap = spec["history_cap"] if spec["verification"].get("cap_history", True) else np.inf
+    cap = spec["history_cap"] if spec["verification"].get("cap_history", False) else np.inf
     cuts = slit_cuts(spec)
     return [solve_pixel_equation(np.minimum(image, cap), Gc, lc, h_px, spec["pixel_padding"], rtol=1e-12, cuts=cuts) for image in images]
 
@@ -222,7 +222,7 @@ def _train_change_net(spec: dict, h_px: float, start: np.ndarray, images: list, 
 
     if len(phis) != len(images):
         raise ValueError("the change network trains on the 'no network' replay's states: list that variant before it")
-    cap = spec["history_cap"] if spec["verification"].get("cap_history", True) else np.inf
+    cap = spec["history_cap"] if spec["verification"].get("cap_history", False) else np.inf
     before = [start, *phis[:-1]]
     half = max(1, len(images) // 2)
     states = [(np.minimum(images[k], cap), before[k]) for k in range(half)]
