@@ -17,7 +17,8 @@ Snakemake process created 808,473 timer threads (~230 alive at a time) and its m
 
 Reproduce: ``benchmarks/snakemake_scheduler.py`` (independent jobs that only sleep, all ready at
 the start, on 2 cores) prints the Snakemake process's CPU with and without this patch; the
-difference grows with the square of the run's length.
+difference grows with the square of the run's length (60, 120, 240 jobs of 2 s: 2.9 / 2.0, 7.8 /
+3.1, 23.0 / 6.5 s of CPU without / with it).
 
 Expected: at most one pending wake-up; a job event wakes the scheduler anyway. A longer timespan
 is no cure: the scheduler then waits for the timer between jobs.
