@@ -220,6 +220,15 @@ def test_an_l_panel_runs_and_the_exact_pixel_step_follows_fem(quick_config, tmp_
     solid = geometry.solid_pixels(config["scenes"]["l-panel"], PixelGrid.for_scene(config["scenes"]["l-panel"]))
     _, phi = maps[max(maps)]
     assert np.abs(phi[~solid]).max() < 1e-9 and phi[solid].max() > 0.9
+    # the same panel on the adaptive mesh (the cut-out's cells left out): FEM's peak to 1 %
+    from ifenn.adaptive.run import run_adaptive
+    from ifenn.config import adaptive_run_spec
+
+    config["adaptive_runs"]["l-panel-adaptive"] = {"fem_run": "l-panel"}
+    config = validate_config(config, petsc_names=False)
+    adaptive = pd.DataFrame(run_adaptive(adaptive_run_spec(config, "l-panel-adaptive"), tmp_path / "adaptive", progress=False))
+    assert adaptive.reaction_force.max() == pytest.approx(fem.reaction_force.max(), rel=0.01)
+    assert (adaptive.outside_fine == 0).all()
 
 
 SEGMENT = {"from": [0.85, 0.5], "to": [0.95, 0.5], "y": "load"}
@@ -285,3 +294,32 @@ def test_the_l_panel_specimen_is_config_and_its_measurement_must_exist(paper_con
     config["specimens"]["l-panel"]["measured"]["file"] = "data/missing.csv"
     with pytest.raises(ConfigError, match="specimens.l-panel.measured.file"):
         validate_config(config, petsc_names=False)
+
+
+def test_patch_test_on_an_adaptive_mesh_with_a_cut_out():
+    """The adaptive mesh leaves a cut-out's fine cells out (finest leaves, so none straddles its
+    edge): uniaxial plane strain on the square without its right strip, graded with hanging nodes,
+    is exact, and the removed pixels read 0."""
+    from ifenn.adaptive.problem import AdaptiveMeshProblem
+    from ifenn.adaptive.quadtree import build_quadtree
+
+    scene = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [16, 16],
+             "cutouts": [{"x": [0.75, 1.0], "y": [0.0, 1.0]}],
+             "boundary": {"bottom": {"y": "fixed"}, "left": {"x": "fixed"}, "top": {"y": "load"}}}
+    pixels = PixelGrid.for_scene(scene)
+    removed = ~geometry.solid_pixels(scene, pixels)
+    target = np.zeros(pixels.shape, dtype=int)
+    target[10:14, 4:9] = 3
+    tree = build_quadtree(target, 3, (pixels.x0, pixels.y0), pixels.h_px, removed=removed)
+    assert len(tree.hanging) > 0 and tree.points[:, 0].max() == pytest.approx(0.75)
+    problem = AdaptiveMeshProblem(tree, scene, MATERIAL, {"ksp_type": "preonly", "pc_type": "lu"}, pixels)
+    problem.set_phase_field(np.zeros(pixels.shape))
+    problem.solve_displacement(1e-3)
+    lam, mu = MATERIAL["lame_lambda"], MATERIAL["lame_mu"]
+    u = problem.displacement.x.array.reshape(-1, 2)
+    x = problem.V.tabulate_dof_coordinates()[:, :2]
+    np.testing.assert_allclose(u[:, 1], 1e-3 * x[:, 1], atol=1e-14)
+    np.testing.assert_allclose(u[:, 0], -lam / (lam + 2 * mu) * 1e-3 * x[:, 0], atol=1e-14)
+    assert problem.reaction_force() == pytest.approx((lam + 2 * mu - lam**2 / (lam + 2 * mu)) * 1e-3 * 0.75, rel=1e-10)
+    psi = problem.tensile_energy()
+    assert (psi[removed] == 0).all() and np.ptp(psi[~removed]) < 1e-9 * psi.max()

@@ -375,6 +375,10 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
         for run in specimen["fem_runs"]:
             if run not in config["fem_runs"]:
                 problems.append(f"config key 'specimens.{name}.fem_runs': '{run}' is not a FEM run; allowed: {sorted(config['fem_runs'])}")
+        for run in specimen.get("adaptive_runs", []):
+            if run not in config.get("adaptive_runs", {}):
+                problems.append(f"config key 'specimens.{name}.adaptive_runs': '{run}' is not an adaptive run; "
+                                f"allowed: {sorted(config.get('adaptive_runs', {}))}")
         if not (REPO / specimen["measured"]["file"]).is_file():
             problems.append(f"config key 'specimens.{name}.measured.file': no file {specimen['measured']['file']} in the repository")
     problems += _reference_convergence_problems(config)
@@ -490,9 +494,6 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         elif (schedule := config["schedules"].get(fem_runs[entry["fem_run"]]["schedule"])) is not None and schedule_increments(schedule) is None:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
                             "run fixed schedules")
-        elif config["scenes"].get(fem_runs[entry["fem_run"]]["scene"], {}).get("cutouts"):
-            problems.append(f"config key '{key}.fem_run': the scene of '{entry['fem_run']}' has cut-outs, which the adaptive "
-                            "mesh does not take yet; run it as a FEM or an IFENN run")
         ifenn_run = entry.get("ifenn_run")
         if ifenn_run is not None:
             ifenn_runs = config.get("ifenn_runs", {})

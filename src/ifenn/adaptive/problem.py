@@ -34,6 +34,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from ifenn import geometry
 from ifenn.adaptive.quadtree import Quadtree
 from ifenn.fem import physics, supports
 from ifenn.fem.problem import QUADRATURE, check_converged, configure_ksp, petsc_options
@@ -142,8 +143,9 @@ class AdaptiveMeshProblem:
         n_q = self.Q.dofmap.index_map.size_local
         self.sample = scipy.sparse.csr_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))), shape=(n_q, n_px))
         covered = np.bincount(np.concatenate([index for *_, index in self._pixel_centres.values()]), minlength=n_px)
-        if covered.size != n_px or (covered != 1).any():
-            raise ValueError(f"the mesh's cells do not cover the {grid.shape} pixel grid one pixel centre each")
+        solid = np.ravel(geometry.solid_pixels(self.scene, grid)) if self.scene.get("cutouts") else np.ones(n_px, dtype=bool)
+        if covered.size != n_px or (covered[solid] != 1).any() or covered[~solid].any():
+            raise ValueError(f"the mesh's cells do not cover the solid of the {grid.shape} pixel grid one pixel centre each")
 
     def _build_constraints(self) -> None:
         """P: dofs -> free dofs (hanging nodes the mean of their edge's ends), as a PETSc matrix."""
@@ -217,14 +219,14 @@ class AdaptiveMeshProblem:
 
     def tensile_energy(self) -> np.ndarray:
         """psi_0^+ of the current displacement at every pixel centre, as an image."""
-        out = np.empty(self.pixels.nx_px * self.pixels.ny_px)
+        out = np.zeros(self.pixels.nx_px * self.pixels.ny_px)   # 0 in a cut-out
         for m, (_, cells, index) in self._pixel_centres.items():
             out[index] = self._psi_expressions[m].eval(cells).ravel()
         return out.reshape(self.pixels.shape)
 
     def displacement_at_pixels(self) -> np.ndarray:
         """u at every pixel centre, (ny_px, nx_px, 2) mm (a mesh-independent record)."""
-        out = np.empty((self.pixels.nx_px * self.pixels.ny_px, 2))
+        out = np.zeros((self.pixels.nx_px * self.pixels.ny_px, 2))   # 0 in a cut-out
         for m, (_, cells, index) in self._pixel_centres.items():
             out[index] = self._u_expressions[m].eval(cells).reshape(-1, 2)
         return out.reshape(*self.pixels.shape, 2)
@@ -288,7 +290,7 @@ def transfer_displacement(old: AdaptiveMeshProblem, new: AdaptiveMeshProblem) ->
     t_old, t_new = old.tree, new.tree
     u_node = np.zeros((t_old.n_nodes, 2))
     u_node[old.node_of_block] = old.displacement.x.array.reshape(-1, 2)
-    cell_of = np.empty((t_old.ny, t_old.nx), dtype=np.int64)
+    cell_of = np.full((t_old.ny, t_old.nx), -1, dtype=np.int64)   # -1: a cut-out's fine cell
     for size in np.unique(t_old.cell_size):
         cells = np.flatnonzero(t_old.cell_size == size)
         d = np.arange(size)
@@ -296,7 +298,10 @@ def transfer_displacement(old: AdaptiveMeshProblem, new: AdaptiveMeshProblem) ->
         cols = t_old.cell_origin[cells, 0, None, None] + d[None, None, :]
         cell_of[rows, cols] = cells[:, None, None]
     nodes = new.free_nodes
-    ij = t_new.node_ij[np.where(nodes < t_new.n_grid_nodes, nodes, t_new.twin_of[np.maximum(nodes - t_new.n_grid_nodes, 0)])]
+    grid_node = nodes.copy()   # a twin stands on its grid node's place
+    twins = nodes >= t_new.n_grid_nodes
+    grid_node[twins] = t_new.twin_of[nodes[twins] - t_new.n_grid_nodes]
+    ij = t_new.node_ij[grid_node]
     cx, cy = np.minimum(ij[:, 0], t_old.nx - 1), np.minimum(ij[:, 1], t_old.ny - 1)
     twin = nodes >= t_new.n_grid_nodes
     for slit in t_new.slits:   # the other face's nodes look into the cell below / left of the slit
@@ -307,6 +312,11 @@ def transfer_displacement(old: AdaptiveMeshProblem, new: AdaptiveMeshProblem) ->
         else:
             cx = np.where(on, ij[:, 0] - 1, cx)
     cell = cell_of[cy, cx]
+    for dx, dy in ((-1, 0), (0, -1), (-1, -1)):   # a node on a cut-out's edge: a solid cell that has it
+        missing = cell < 0
+        if not missing.any():
+            break
+        cell[missing] = cell_of[np.maximum(cy[missing] + dy, 0), np.maximum(cx[missing] + dx, 0)]
     xi = (ij[:, 0] - t_old.cell_origin[cell, 0]) / t_old.cell_size[cell]
     eta = (ij[:, 1] - t_old.cell_origin[cell, 1]) / t_old.cell_size[cell]
     weights = np.column_stack([(1 - xi) * (1 - eta), xi * (1 - eta), (1 - xi) * eta, xi * eta])

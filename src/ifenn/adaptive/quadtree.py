@@ -49,6 +49,8 @@ class Quadtree:
     levels: int
     leaf_level: np.ndarray          # (ny, nx) int: the level of the leaf holding each fine cell
     slits: list[FineSlit] = field(default_factory=list)
+    #: (ny, nx) bool: fine cells in a cut-out, whose leaves (finest, never straddling) are left out
+    removed: np.ndarray | None = None
 
     def __post_init__(self):
         self.ny, self.nx = self.leaf_level.shape
@@ -57,6 +59,8 @@ class Quadtree:
             size = 2 ** (self.levels - level)
             iy, ix = np.meshgrid(np.arange(0, self.ny, size), np.arange(0, self.nx, size), indexing="ij")
             leaf = self.leaf_level[iy, ix] == level
+            if self.removed is not None:
+                leaf &= ~self.removed[iy, ix]
             origins.append(np.column_stack([ix[leaf], iy[leaf]]))
             sizes.append(np.full(int(leaf.sum()), size))
         #: per cell: lower-left corner (fine units, x then y) and edge length (fine cells)
@@ -210,8 +214,14 @@ def coarsest_levels(nx: int, ny: int, wanted: int) -> int:
     return levels
 
 
-def build_quadtree(target: np.ndarray, levels: int, origin, h_fine: float, slits: list[FineSlit] = ()) -> Quadtree:
-    """The balanced quadtree of a target level map with its slits (module doc)."""
+def build_quadtree(target: np.ndarray, levels: int, origin, h_fine: float, slits: list[FineSlit] = (),
+                   removed: np.ndarray | None = None) -> Quadtree:
+    """The balanced quadtree of a target level map with its slits (module doc), without the fine
+    cells ``removed`` (a cut-out's): they are finest leaves, so no leaf straddles a cut-out's edge,
+    and are left out of the mesh."""
     slits = list(slits)
+    target = np.asarray(target, dtype=np.int64)
+    if removed is not None:
+        target = np.where(removed, levels, target)
     leaf = balanced(slit_targets(target, levels, slits), levels, slits)
-    return Quadtree((float(origin[0]), float(origin[1])), float(h_fine), levels, leaf, slits)
+    return Quadtree((float(origin[0]), float(origin[1])), float(h_fine), levels, leaf, slits, removed)

@@ -70,7 +70,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ifenn import run_files
+from ifenn import geometry, run_files
 from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
 from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
@@ -191,6 +191,10 @@ class AdaptiveRun:
         self.n_fine = (self.grid.ny_px // p, self.grid.nx_px // p)
         self.levels = coarsest_levels(self.n_fine[1], self.n_fine[0], self.settings.levels)
         self.slits = fine_slits(self.scene, self.h_fine)
+        # the fine cells of the scene's cut-outs: left out of every mesh (ifenn.geometry)
+        centres_y = self.grid.y0 + (np.arange(self.n_fine[0]) + 0.5) * self.h_fine
+        centres_x = self.grid.x0 + (np.arange(self.n_fine[1]) + 0.5) * self.h_fine
+        self.removed = geometry.in_cutout(self.scene, centres_x[None, :], centres_y[:, None]) if self.scene.get("cutouts") else None
         Gc, lc = self.material["Gc"], self.material["lc"]
         self.equation = PixelEquation(Gc, lc, self.grid.h_px, "replicate", SlitCuts.for_scene(self.scene, self.grid))
         self.loads = load_control(spec)
@@ -246,7 +250,8 @@ class AdaptiveRun:
         from ifenn.adaptive.problem import AdaptiveMeshProblem, transfer_displacement
 
         self.mesh_region = region
-        tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits)
+        tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits,
+                              self.removed)
         old, self.problem = self.problem, AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
         if old is not None:   # the solve on the new mesh starts from the old solution
             transfer_displacement(old, self.problem)
