@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from ifenn.config import ConfigError, fem_run_spec, scene_material, validate_config
@@ -114,12 +115,88 @@ def test_a_scene_material_is_refused_naming_the_key(with_panel, material, messag
     assert "scenes.panel.material" in str(info.value)
 
 
-def test_the_network_is_not_asked_about_a_material_it_was_not_trained_on(with_panel):
+def test_the_network_serves_another_material_at_its_lc_over_h_and_is_refused_elsewhere_unless_verified(with_panel):
+    """Another material at the network's lc/h_px: served (its input scaled); at another lc/h_px an
+    unverified run is refused by key, a verified one runs the certified pixel step without it."""
     with_panel["ifenn_runs"]["panel"] = {"fem_run": "panel"}
-    with pytest.raises(ConfigError, match="ifenn_runs.panel': the network was trained on another material"):
+    with pytest.raises(ConfigError, match="ifenn_runs.panel': the network was trained on Gc 2.7, lc 0.15 at lc/h 6"):
         validate_config(with_panel, petsc_names=False)
-    with_panel["ifenn_runs"]["panel"] = {"fem_run": "panel", "predictor": "exact_pixel"}
+    with_panel["ifenn_runs"]["panel"] = {"fem_run": "panel", "verification": {"enabled": True}}
     validate_config(with_panel, petsc_names=False)
+    with_panel["ifenn_runs"]["panel"] = {"fem_run": "panel"}
+    with_panel["scenes"]["panel"]["elements"] = [12, 12]        # lc/h = 0.5 / (1/12) = 6, the network's
+    validate_config(with_panel, petsc_names=False)
+
+
+def test_the_pixel_equation_depends_on_the_material_through_h_lc_over_gc_and_lc_over_h():
+    """The identity the network's service rests on: the pixel solution for (Gc, lc, h) and H equals
+    the one for (Gc', lc', h') and H (lc / Gc) / (lc' / Gc') when lc / h = lc' / h'."""
+    from ifenn.network.picnn import solve_pixel_equation
+
+    rng = np.random.default_rng(0)
+    x = np.linspace(-1, 1, 48)
+    history = 300.0 * np.exp(-(x[None, :] ** 2 + x[:, None] ** 2) / 0.05) * (1 + 0.1 * rng.random((48, 48)))
+    phi = solve_pixel_equation(history, 0.089, 10.0, 10.0 / 6, "replicate", rtol=1e-13)
+    scale = (10.0 / 0.089) / (0.15 / 2.7)
+    same = solve_pixel_equation(history * scale, 2.7, 0.15, 0.15 / 6, "replicate", rtol=1e-13)
+    np.testing.assert_allclose(phi, same, atol=1e-10)
+    assert phi.max() > 0.3
+
+
+def test_network_service_scales_or_falls_back(tmp_path):
+    import torch
+
+    from ifenn.hybrid.runs import ScaledHistory, network_service
+    from ifenn.network.picnn import PICNN, save_picnn
+
+    torch.manual_seed(0)
+    model = tmp_path / "model.pt"
+    save_picnn(PICNN(padding="replicate"), model, 0.0125, 2.7, 0.15, "test")          # lc / h_px = 12
+    spec = {"predictor": "picnn", "material": {"Gc": 2.7, "lc": 0.15}}
+    assert network_service(spec, model, 0.0125) == {"history_scale": 1.0, "fallback": None}
+    assert network_service(spec, model, 0.05)["fallback"] is None                      # its own material: as published
+    other = {"predictor": "picnn", "material": {"Gc": 0.089, "lc": 10.0}}
+    served = network_service(other, model, 10.0 / 12)
+    assert served["fallback"] is None and served["history_scale"] == pytest.approx((10.0 / 0.089) / (0.15 / 2.7))
+    assert "lc/h_px = 12" in network_service(other, model, 1.0)["fallback"]
+    seen = []
+    wrapped = ScaledHistory(type("Inference", (), {"__call__": lambda self, h: seen.append(h) or h, "t_network": 1.5})(), 3.0)
+    wrapped(np.ones(2))
+    assert seen[0].tolist() == [3.0, 3.0] and wrapped.t_network == 1.5
+
+
+def test_a_verified_run_on_another_material_is_certified_and_tracks_its_fem(quick_config, tmp_path):
+    """The quick snt1 with half the toughness (lc/h the network's): the verified step, fed the scaled
+    H, keeps every increment certified and follows FEM of that material; provenance says how."""
+    import torch
+
+    from ifenn.config import IFENN_OPTIONS
+    from ifenn.fem.mesh import build_mesh, write_mesh
+    from ifenn.fem.solver import run_fem
+    from ifenn.hybrid.runs import run_ifenn
+    from ifenn.network.picnn import PICNN, InputScaling, save_picnn
+    from ifenn.run_files import read_provenance
+
+    spec = copy.deepcopy(fem_run_spec(quick_config, "snt1-I"))
+    spec["material"]["Gc"] = 1.35
+    write_mesh(build_mesh(spec["scene"]), tmp_path / "mesh.xdmf")
+    fem = pd.DataFrame(run_fem(spec, tmp_path / "mesh.xdmf", tmp_path / "fem", progress=False))
+    torch.manual_seed(0)
+    model = tmp_path / "model.pt"
+    h_px = (spec["scene"]["domain"]["x"][1] - spec["scene"]["domain"]["x"][0]) / spec["scene"]["elements"][0] / 2
+    save_picnn(PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval(), model, h_px,
+               2.7, spec["material"]["lc"], "test")
+    verified = {**quick_config["ifenn"]["verification"], "enabled": True}
+    run_spec = {**spec, **{k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, "name": "verified", "smoothing_sigma": None,
+                "irreversible": False, "pixel_padding": "replicate", "inference": "process_zone",
+                "process_zone": quick_config["ifenn"]["process_zone"], "verification": verified}
+    hybrid = pd.DataFrame(run_ifenn(run_spec, tmp_path / "mesh.xdmf", tmp_path / "fem", model, tmp_path / "verified", progress=False))
+    active = hybrid[hybrid.hybrid_active == 1]
+    assert len(active) > 0 and (active.verify_residual_after <= verified["tolerance"]).all()
+    peak = fem.reaction_force.max()
+    assert np.abs(hybrid.reaction_force.to_numpy() - fem.reaction_force.to_numpy()).max() < 0.05 * peak
+    service = read_provenance(tmp_path / "verified")["network_material"]
+    assert service["history_scale"] == pytest.approx(2.0) and service["fallback"] is None
 
 
 @pytest.mark.parametrize("elements, lc, message", [

@@ -640,21 +640,29 @@ def load_values(schedule: list[dict]) -> list[float]:
 
 
 def _network_material_problems(config: dict, name: str, fem_run: str) -> list[str]:
-    """The network answers the pixel equation of the material it was trained on (Gc, lc): a run of
-    the network on a scene of another material is refused, naming what differs (the certified pixel
-    step, predictor exact_pixel or an adaptive run, serves any material)."""
+    """The network answers the pixel equation of the material it was trained on; another material
+    at the same lc / h_px it answers through the equation's dimensionless form (its input scaled
+    by H lc / Gc: ifenn.hybrid.runs.network_service), and where neither holds a verified run runs
+    the certified pixel step without it. An unverified run of the network there is refused."""
     training_scene = config["scenes"].get(config["fem_runs"].get(config["picnn"]["training_run"], {}).get("scene"))
     scene = config["scenes"].get(config["fem_runs"][fem_run]["scene"])
     if training_scene is None or scene is None:
         return []
     trained, own = scene_material(config["material"], training_scene), scene_material(config["material"], scene)
-    differs = {k: (trained[k], own[k]) for k in ("Gc", "lc") if not math.isclose(trained[k], own[k], rel_tol=1e-12)}
-    if not differs:
+    if all(math.isclose(trained[k], own[k], rel_tol=1e-12) for k in ("Gc", "lc")):
         return []
-    said = ", ".join(f"{k} {v[1]:g} (network: {v[0]:g})" for k, v in differs.items())
-    return [f"config key 'ifenn_runs.{name}': the network was trained on another material than its scene's: {said}; "
-            "run this scene with predictor 'exact_pixel' or as an adaptive run (the certified pixel step), or train "
-            "the network on it (picnn.training_run)"]
+
+    def lc_over_h(sc, material):
+        return material["lc"] / ((sc["domain"]["x"][1] - sc["domain"]["x"][0]) / sc["elements"][0])
+
+    run = config["ifenn_runs"][name]
+    verified = {**config["ifenn"].get("verification", {}), **run.get("verification", {})}.get("enabled")
+    if math.isclose(lc_over_h(scene, own), lc_over_h(training_scene, trained), rel_tol=1e-6) or verified:
+        return []
+    return [f"config key 'ifenn_runs.{name}': the network was trained on Gc {trained['Gc']:g}, lc {trained['lc']:g} at "
+            f"lc/h {lc_over_h(training_scene, trained):.4g}; this scene has Gc {own['Gc']:g}, lc {own['lc']:g} at lc/h "
+            f"{lc_over_h(scene, own):.4g}, which no scaling of H maps onto it: run it verified (the certified pixel step "
+            "takes over), with predictor 'exact_pixel', or at the network's lc/h"]
 
 
 def scene_material(material: dict, scene: dict) -> dict:

@@ -21,6 +21,8 @@ increments copied from the FEM run, 1 for the hybrid ones).
 
 from __future__ import annotations
 
+import logging
+import math
 from pathlib import Path
 
 from mpi4py import MPI
@@ -91,23 +93,67 @@ def verified_step_backend(device) -> str:
     return "torch" if resolve_device(device).type == "cuda" else "compiled"
 
 
+class ScaledHistory:
+    """A network inference fed H times ``scale``: the network trained on one material answers the
+    pixel equation of another with the same lc / h_px, whose dimensionless form
+    (1 + 2 H lc / Gc) phi - (lc / h_px)^2 Lap_px(phi) = 2 H lc / Gc depends on H only through
+    H lc / Gc (:func:`network_service`). Everything else is the wrapped inference's."""
+
+    def __init__(self, inference, scale: float):
+        self._inference, self._scale = inference, float(scale)
+
+    def __call__(self, history):
+        return self._inference(history * self._scale)
+
+    def __getattr__(self, name):
+        return getattr(self._inference, name)
+
+
+def network_service(spec: dict, model_path, h_px: float) -> dict:
+    """How the trained network serves this run's material: ``history_scale`` s (the network is fed
+    s H, s = (lc / Gc) / (lc_t / Gc_t) for its training material t) and ``fallback`` (None, or why
+    the network cannot: a material other than its own at another lc / h_px, for which no scaling
+    of H maps the equations onto each other; the verified step then runs without it, the certified
+    pixel step). The scene of the network's own material is served as published, at any lc / h_px."""
+    served = {"history_scale": 1.0, "fallback": None}
+    if spec.get("predictor") != "picnn" or model_path is None:
+        return served
+    from ifenn.network.picnn import load_picnn
+
+    meta = load_picnn(model_path, "cpu")[1]
+    Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
+    Gc_t, lc_t, h_t = float(meta["Gc"]), float(meta["lc"]), float(meta["h_px"])
+    if math.isclose(Gc, Gc_t, rel_tol=1e-12) and math.isclose(lc, lc_t, rel_tol=1e-12):
+        return served
+    if math.isclose(lc / h_px, lc_t / h_t, rel_tol=1e-6):
+        return {**served, "history_scale": (lc / Gc) / (lc_t / Gc_t)}
+    return {**served, "fallback": f"the network was trained on Gc = {Gc_t:g}, lc = {lc_t:g} at lc/h_px = {lc_t / h_t:.4g}; "
+                                  f"this scene has Gc = {Gc:g}, lc = {lc:g} at lc/h_px = {lc / h_px:.4g}"}
+
+
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None,
-                   device="auto"):
+                   device="auto", service: dict | None = None):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
     checked and corrected by the pixel equation when ``spec['verification']['enabled']``
     (:mod:`ifenn.hybrid.verification`; on a GPU the same step in torch, :func:`verified_step_backend`).
     ``shape``: the image's, when known (what the network keeps is then allocated now). ``device``:
-    where the network runs (:mod:`ifenn.device`)."""
+    where the network runs (:mod:`ifenn.device`). ``service``: :func:`network_service` (computed
+    here when not given): H scaled for another material, or the network left out."""
+    service = service or network_service(spec, model_path, h_px)
+    scale = service["history_scale"]
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
         from ifenn.hybrid.verification import PixelEquation, VerifiedInference
 
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
-        warm_start = verification["warm_start"]
+        warm_start = "previous" if service["fallback"] else verification["warm_start"]
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"],
-                    warm_start, spec["history_cap"], verification.get("cap_history", False))
+                    warm_start, spec["history_cap"] / scale, verification.get("cap_history", False))
+        if verified_step_backend(device) == "torch" and scale != 1.0:
+            raise ValueError("the device's verified step does not scale the network's input for another material yet: "
+                             "run this scene on the CPU (device: cpu)")
         if verified_step_backend(device) == "torch":   # the whole step on the device (ifenn.hybrid.device_step)
             from ifenn.device import resolve_device
             from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
@@ -124,10 +170,13 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             zone = spec["process_zone"]
             if verification.get("network_tolerance") is not None:
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
-            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device)
+            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device, scale)
         equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
         return VerifiedInference(network, equation, *settings)
-    return _network_inference(spec, model_path, h_px, shape, device)
+    if service["fallback"]:
+        raise ValueError(f"the network cannot serve this scene's material ({service['fallback']}): run it verified "
+                         "(the certified pixel step) or with predictor exact_pixel")
+    return _network_inference(spec, model_path, h_px, shape, device, scale)
 
 
 def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, device="auto"):
@@ -136,12 +185,16 @@ def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, devi
     from ifenn.hybrid.pixel_step import PixelPhaseField
 
     verified = bool((spec.get("verification") or {}).get("enabled"))
-    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape, device) if comm.rank == 0 else None
-    return PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""), spec["history_cap"],
-                           spec["irreversible"], verified)
+    service = network_service(spec, model_path, problem.pixels.h_px)
+    inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape, device, service) if comm.rank == 0 else None
+    # the published cap is on the network's input: on another material's H it is cap / scale
+    return PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""),
+                           spec["history_cap"] / service["history_scale"], spec["irreversible"], verified)
 
 
-def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"):
+def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto", scale: float = 1.0):
+    """The network's (or the exact pixel solve's) inference; ``scale``: the network is fed
+    ``scale`` H (:class:`ScaledHistory`, another material's H in its own units)."""
     from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
 
     sigma, truncate = spec["smoothing_sigma"], spec["smoothing_truncate"]
@@ -156,11 +209,14 @@ def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"
         evaluator = make_evaluator(model, spec.get("evaluation", "orbit") if device.type == "cpu" else "convolution")
         if spec.get("inference", "full") == "process_zone":
             zone = spec["process_zone"]
-            return ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
-                                        local_scale=spec["material"]["Gc"] / spec["material"]["lc"], shape=shape)
-        if shape is not None:
-            evaluator.prepare(shape)
-        return FullInference(evaluator.predict, sigma, truncate, evaluator.kernel)
+            # its local phase field 2 H / (Gc/lc + 2 H) on the scaled H: Gc/lc scaled alike
+            inference = ProcessZoneInference(evaluator, sigma, truncate, zone["tolerance"], zone["refresh_every"], zone["full_fraction"],
+                                             local_scale=scale * spec["material"]["Gc"] / spec["material"]["lc"], shape=shape)
+        else:
+            if shape is not None:
+                evaluator.prepare(shape)
+            inference = FullInference(evaluator.predict, sigma, truncate, evaluator.kernel)
+        return inference if scale == 1.0 else ScaledHistory(inference, scale)
     if spec["predictor"] == "exact_pixel":
         from ifenn.network.picnn import solve_pixel_equation
 
@@ -208,5 +264,8 @@ def ifenn_run(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     device = network_device(spec, device)
     step = pixel_phase_field(spec, problem, model_path, comm, device)
     start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
+    service = network_service(spec, model_path, problem.pixels.h_px)
+    if service["fallback"]:
+        logging.getLogger(__name__).warning("%s: the network is left out, the certified pixel step runs: %s", spec["name"], service["fallback"])
     return StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
-                        provenance_extra={"switch_over": record, **device_record(device)})
+                        provenance_extra={"switch_over": record, "network_material": service, **device_record(device)})
