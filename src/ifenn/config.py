@@ -375,6 +375,10 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
         for run in specimen["fem_runs"]:
             if run not in config["fem_runs"]:
                 problems.append(f"config key 'specimens.{name}.fem_runs': '{run}' is not a FEM run; allowed: {sorted(config['fem_runs'])}")
+        for run in specimen.get("ifenn_runs", []):
+            if run not in config.get("ifenn_runs", {}):
+                problems.append(f"config key 'specimens.{name}.ifenn_runs': '{run}' is not an IFENN run; "
+                                f"allowed: {sorted(config.get('ifenn_runs', {}))}")
         for run in specimen.get("adaptive_runs", []):
             if run not in config.get("adaptive_runs", {}):
                 problems.append(f"config key 'specimens.{name}.adaptive_runs': '{run}' is not an adaptive run; "

@@ -75,6 +75,7 @@ rule specimen_figure:
     """A specimen of the field against its measured curve (config specimens)."""
     input:
         histories=lambda w: [f"results/fem/{run}/history.csv" for run in config["specimens"][w.specimen]["fem_runs"]],
+        ifenn=lambda w: [f"results/ifenn/{run}/history.csv" for run in config["specimens"][w.specimen].get("ifenn_runs", [])],
         adaptive=lambda w: [f"results/adaptive/{run}/history.csv" for run in config["specimens"][w.specimen].get("adaptive_runs", [])],
         fields=lambda w: f"results/fem/{config['specimens'][w.specimen]['fem_runs'][0]}/fields.h5",
         measured=lambda w: os.path.join(workflow.basedir, config["specimens"][w.specimen]["measured"]["file"]),
@@ -82,6 +83,7 @@ rule specimen_figure:
         report("results/figures/specimens/{specimen}.png", caption="../report/specimen.rst", category="The field's specimens"),
     params:
         runs=lambda w: config["specimens"][w.specimen]["fem_runs"],
+        ifenn_runs=lambda w: config["specimens"][w.specimen].get("ifenn_runs", []),
         adaptive_runs=lambda w: config["specimens"][w.specimen].get("adaptive_runs", []),
         label=lambda w: config["specimens"][w.specimen]["measured"]["label"],
         scene=lambda w: config["scenes"][config["fem_runs"][config["specimens"][w.specimen]["fem_runs"][0]]["scene"]],

@@ -8,6 +8,7 @@ from ifenn.studies.plots import specimen_figure
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])
 curves = {f"FEM {run}": pd.read_csv(path) for run, path in zip(snakemake.params.runs, snakemake.input.histories, strict=True)}
+curves.update({f"IFENN {run}": pd.read_csv(path) for run, path in zip(snakemake.params.ifenn_runs, snakemake.input.ifenn, strict=True)})
 curves.update({f"adaptive {run}": pd.read_csv(path)
                for run, path in zip(snakemake.params.adaptive_runs, snakemake.input.adaptive, strict=True)})
 maps, attrs = read_phase_field_maps(snakemake.input.fields)
