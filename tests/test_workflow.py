@@ -294,7 +294,13 @@ def test_quick_profile_reference_convergence(quick_workflow):
     phase field at h/2. A verified run that switches late follows FEM at h after the switch (adnt:
     0.03 % apart) and is then as far from the finer FEM as FEM is, never farther. Paper scale: docs/decisions.md."""
     table = pd.read_csv(results := quick_workflow / "results" / "tables" / "reference_convergence.csv", keep_default_na=False)
-    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear"}
+    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear", "l-panel"}
+    # the quick L-panel (lc a ninth of the panel: the damage spreads from the clamped foot, measured
+    # 0.44 / 0.69 / 0.82 % for FEM / verified / whole path) does not rank discretisations; each of its
+    # methods is within 1 % of the finer FEM after the peak
+    panel = table[table.case == "l-panel"]
+    assert len(panel) == 3 and (panel.rms_vs_fine < 0.01).all()
+    table = table[table.case != "l-panel"]
     fem = table[table.method == "fem"].set_index("case")
     assert (fem.rms_vs_fine > 0.003).all() and (fem.peak_force_fine < fem.peak_force).all()  # a coarser AT2 mesh is tougher
     runs = table[table.method == "ifenn"]
@@ -317,7 +323,13 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
     results = quick_workflow / "results"
     table = pd.read_csv(results / "tables" / "adaptive_resolution.csv").set_index("run")
     assert set(table.method) == {"fem-uniform", "fem-adaptive", "verified-adaptive"}
-    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear"}
+    assert set(table.case) == {"snt1-II", "snt1-III", "sdnt", "adnt", "snt-shear", "l-panel"}
+    # the quick L-panel (a cut-out): both adaptive methods nearer the finer FEM's peak than FEM at h
+    # (measured 0.28 against 0.70 %) and within 1 % after it
+    panel = table[table.case == "l-panel"]
+    for run in ("l-panel-adaptive", "l-panel-adaptive-verified"):
+        assert abs(panel.loc[run].peak_error_vs_fine_pct) < abs(panel.loc["l-panel"].peak_error_vs_fine_pct)
+        assert panel.loc[run].post_peak_rms_vs_fine_pct < 1.0 and panel.loc[run].increments_outside_fine == 0
     for case in ("snt1-III", "sdnt", "adnt"):   # measured: peak 0.02 / 0.08 / 0.09 %, RMS 0.18-0.21 / 0.38 / 0.35 % (FEM at h 0.9-1.7 %)
         fem = table.loc[case]
         for row in (table.loc[f"{case}-adaptive"], table.loc[f"{case}-adaptive-verified"]):
