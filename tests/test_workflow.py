@@ -92,7 +92,7 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     # evaluated whole); the two-notch scenes use windows
     assert (agreement.evaluated_fraction_mean < 0.6).any() and (agreement.evaluated_fraction_mean <= 1).all()
     table = pd.read_csv(results / "tables" / "speed_accuracy.csv")
-    assert {"snt1", "sdnt"} == set(table.scene) and table.is_reference.sum() == 2
+    assert {"snt1", "sdnt", "l-panel"} == set(table.scene) and table.is_reference.sum() == 3
     assert table.pareto_wall_s.any() and (table.force_l2_rel_error[~table.is_reference] > 0).all()
     stability = pd.read_csv(results / "tables" / "stability.csv")
     assert set(stability.panel) == {"load step", "lc/h", "IFENN option"}
@@ -283,7 +283,7 @@ def test_quick_profile_whole_path(quick_workflow):
     assert (results / "figures" / "whole_run_speed.png").stat().st_size > 10_000
     assert (results / "figures" / "whole_path.png").stat().st_size > 10_000
     points = pd.read_csv(results / "tables" / "speed_accuracy.csv")
-    assert points.variant.str.endswith("whole path").sum() == 4
+    assert points.variant.str.endswith("whole path").sum() == 5
 
 
 def test_quick_profile_reference_convergence(quick_workflow):
@@ -355,10 +355,10 @@ def test_quick_profile_adaptive_resolution(quick_workflow):
     # finer uniform mesh too (0.68, 0.70)
     points = pd.read_csv(results / "tables" / "speed_accuracy.csv").set_index("run")
     adaptive = points[points.method == "adaptive"]
-    assert len(adaptive) == 8 and adaptive.variant.str.startswith("adaptive mesh").all()
+    assert len(adaptive) == 11 and adaptive.variant.str.startswith("adaptive mesh").all()
     assert (adaptive.displacement_solves >= adaptive.increments).all()
-    assert set(points.index[points.is_reference]) == {"snt1-III-conv-adaptive", "sdnt-conv-adaptive"}
-    assert set(points.reference) == {"snt1-III-conv-adaptive", "sdnt-conv-adaptive"}
+    references = {"snt1-III-conv-adaptive", "sdnt-conv-adaptive", "l-panel-conv-adaptive"}
+    assert set(points.index[points.is_reference]) == references and set(points.reference) == references
     reference = points[points.is_reference]
     assert (reference.force_l2_rel_error == 0).all() and (reference.post_peak_rms == 0).all()
     fem_points = points[points.method == "fem"]
