@@ -64,6 +64,8 @@ rule fem_force_figure:
         history="results/fem/{run}/history.csv",
     output:
         report("results/figures/fem/{run}_force_displacement.png", caption="../report/fem_force.rst", category="FEM reference runs"),
+    params:
+        force_unit=lambda w: "N" if "thickness" in config["scenes"][config["fem_runs"][w.run]["scene"]] else "N/mm",
     conda:
         "../envs/ifenn.yaml"
     log:

@@ -82,15 +82,15 @@ def mesh_figure(mesh, scene: dict, name: str, path) -> None:
     _save(fig, path)
 
 
-def force_displacement_figure(curves: dict, path, title: str = "", u_max: float | None = None) -> None:
+def force_displacement_figure(curves: dict, path, title: str = "", u_max: float | None = None, force_unit: str = "N/mm") -> None:
     """Reaction force against prescribed displacement; ``curves`` maps label -> DataFrame
-    with columns u and reaction_force."""
+    with columns u and reaction_force; ``force_unit``: N for a scene with a thickness."""
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for label, frame in curves.items():
         frame = frame if u_max is None else frame[frame["u"] <= u_max + 1e-15]
         ax.plot(frame["u"], frame["reaction_force"], label=label, lw=1.4)
     ax.set_xlabel("prescribed displacement u (mm)")
-    ax.set_ylabel("reaction force (N/mm)")
+    ax.set_ylabel(f"reaction force ({force_unit})")
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend()
