@@ -200,33 +200,33 @@ def test_an_l_panel_runs_and_the_exact_pixel_step_follows_fem(quick_config, tmp_
     from ifenn.run_files import read_phase_field_maps
 
     config = copy.deepcopy(quick_config)
-    config["scenes"]["l-panel"] = {**copy.deepcopy(L_PANEL), "elements": [20, 20]}
+    config["scenes"]["corner"] = {**copy.deepcopy(L_PANEL), "elements": [20, 20]}
     # pulled at the top, held at the leg's foot: the re-entrant corner concentrates the stress
-    config["scenes"]["l-panel"]["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "top": {"y": "load"}}
-    config["scenes"]["l-panel"]["material"] = {"lc": 0.1}        # lc/h = 2: the test's coarsest
-    config["schedules"]["lp"] = [{"increments": 60, "step": 1.0e-3}]
-    config["fem_runs"]["l-panel"] = {"scene": "l-panel", "schedule": "lp"}
-    config["ifenn_runs"]["l-panel-exact"] = {"fem_run": "l-panel", "predictor": "exact_pixel", "smoothing_sigma": None,
+    config["scenes"]["corner"]["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "top": {"y": "load"}}
+    config["scenes"]["corner"]["material"] = {"lc": 0.1}        # lc/h = 2: the test's coarsest
+    config["schedules"]["corner"] = [{"increments": 60, "step": 1.0e-3}]
+    config["fem_runs"]["corner"] = {"scene": "corner", "schedule": "corner"}
+    config["ifenn_runs"]["corner-exact"] = {"fem_run": "corner", "predictor": "exact_pixel", "smoothing_sigma": None,
                                              "switch_over": "start"}
     config = validate_config(config, petsc_names=False)
-    spec = fem_run_spec(config, "l-panel")
+    spec = fem_run_spec(config, "corner")
     write_mesh(build_mesh(spec["scene"]), tmp_path / "mesh.xdmf")
     fem = pd.DataFrame(run_fem(spec, tmp_path / "mesh.xdmf", tmp_path / "fem", progress=False))
-    exact = pd.DataFrame(run_ifenn(ifenn_run_spec(config, "l-panel-exact"), tmp_path / "mesh.xdmf", None, None,
+    exact = pd.DataFrame(run_ifenn(ifenn_run_spec(config, "corner-exact"), tmp_path / "mesh.xdmf", None, None,
                                    tmp_path / "exact", progress=False))
     assert fem.reaction_force.max() > 2 * fem.reaction_force.iloc[0] and fem.reaction_force.iloc[-1] < 0.5 * fem.reaction_force.max()
     assert exact.reaction_force.max() == pytest.approx(fem.reaction_force.max(), rel=0.01)
     maps, _ = read_phase_field_maps(tmp_path / "exact" / "fields.h5")
-    solid = geometry.solid_pixels(config["scenes"]["l-panel"], PixelGrid.for_scene(config["scenes"]["l-panel"]))
+    solid = geometry.solid_pixels(config["scenes"]["corner"], PixelGrid.for_scene(config["scenes"]["corner"]))
     _, phi = maps[max(maps)]
     assert np.abs(phi[~solid]).max() < 1e-9 and phi[solid].max() > 0.9
     # the same panel on the adaptive mesh (the cut-out's cells left out): FEM's peak to 1 %
     from ifenn.adaptive.run import run_adaptive
     from ifenn.config import adaptive_run_spec
 
-    config["adaptive_runs"]["l-panel-adaptive"] = {"fem_run": "l-panel"}
+    config["adaptive_runs"]["corner-adaptive"] = {"fem_run": "corner"}
     config = validate_config(config, petsc_names=False)
-    adaptive = pd.DataFrame(run_adaptive(adaptive_run_spec(config, "l-panel-adaptive"), tmp_path / "adaptive", progress=False))
+    adaptive = pd.DataFrame(run_adaptive(adaptive_run_spec(config, "corner-adaptive"), tmp_path / "adaptive", progress=False))
     assert adaptive.reaction_force.max() == pytest.approx(fem.reaction_force.max(), rel=0.01)
     assert (adaptive.outside_fine == 0).all()
 
