@@ -58,3 +58,31 @@ def build_problem(scene, material, petsc, tmp_path, name="scene"):
     write_mesh(build_mesh(scene), path)
     domain = read_dolfinx_mesh(path)
     return FractureProblem(domain, scene, material, petsc), path
+
+
+def assert_uniaxial_plane_strain(problem, strain: float, width: float) -> None:
+    """A problem held at y = 0 in y and x = 0 in x, pulled to u_y = strain y at the top, has the
+    linear uniaxial plane-strain field at every node (hanging ones included) and the analytic force
+    (lambda + 2 mu - lambda^2 / (lambda + 2 mu)) strain width on the top edge."""
+    import numpy as np
+    import pytest
+
+    lam, mu = problem.material["lame_lambda"], problem.material["lame_mu"]
+    u = problem.displacement.x.array.reshape(-1, 2)
+    x = problem.V.tabulate_dof_coordinates()[:, :2]
+    np.testing.assert_allclose(u[:, 1], strain * x[:, 1], atol=1e-14)
+    np.testing.assert_allclose(u[:, 0], -lam / (lam + 2 * mu) * strain * x[:, 0], atol=1e-14)
+    assert problem.reaction_force() == pytest.approx((lam + 2 * mu - lam**2 / (lam + 2 * mu)) * strain * width, rel=1e-10)
+
+
+def assert_certificate_bounds_the_error(exact, history, Gc, lc, h_px, cuts, seed=2) -> None:
+    """max |r| (normalised, with the cuts) bounds max |phi - exact| for perturbations of three sizes."""
+    import numpy as np
+
+    from ifenn.hybrid.verification import normalised_residual
+
+    rng = np.random.default_rng(seed)
+    for scale in (1e-3, 1e-2, 0.1):
+        phi = exact + scale * rng.standard_normal(exact.shape)
+        bound = np.abs(normalised_residual(phi, history, Gc, lc, h_px, "replicate", cuts)).max()
+        assert np.abs(phi - exact).max() <= bound * (1 + 1e-9)

@@ -8,6 +8,7 @@ import copy
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import assert_uniaxial_plane_strain
 
 from ifenn import run_files
 from ifenn.adaptive.quadtree import FineSlit, build_quadtree, coarsest_levels, leaf_levels
@@ -115,12 +116,7 @@ def test_patch_test_on_a_graded_mesh_with_hanging_nodes():
     problem = _problem(tree)
     problem.set_phase_field(np.zeros(problem.pixels.shape))
     problem.solve_displacement(1e-3)
-    lam, mu = MATERIAL["lame_lambda"], MATERIAL["lame_mu"]
-    u = problem.displacement.x.array.reshape(-1, 2)
-    x = problem.V.tabulate_dof_coordinates()[:, :2]
-    np.testing.assert_allclose(u[:, 1], 1e-3 * x[:, 1], atol=1e-14)
-    np.testing.assert_allclose(u[:, 0], -lam / (lam + 2 * mu) * 1e-3 * x[:, 0], atol=1e-14)
-    assert problem.reaction_force() == pytest.approx((lam + 2 * mu - lam**2 / (lam + 2 * mu)) * 1e-3, rel=1e-10)
+    assert_uniaxial_plane_strain(problem, 1e-3, 1.0)
     # psi+ at every pixel centre: the uniform value
     psi = problem.tensile_energy()
     np.testing.assert_allclose(psi, psi.mean(), rtol=1e-9)

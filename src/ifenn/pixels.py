@@ -67,9 +67,9 @@ Box = tuple[slice, slice]
 
 
 def _stencil_neighbours(shape: tuple[int, int], padding: str):
-    """Per stencil link (dy, dx): pixel indices (iy, ix), its neighbour (jy, jx) as the padding
-    reads it, the weight, and which links exist (replicate: folded onto the edge pixel, none onto
-    the pixel itself; zeros: none beyond the image)."""
+    """Per stencil link (dy, dx, weight): pixel indices (iy, ix), its neighbour (jy, jx) as the
+    padding reads it, and which links exist (replicate: folded onto the edge pixel, none onto the
+    pixel itself, which carries nothing; zeros: none beyond the image)."""
     ny, nx = shape
     iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
     for dy, dx, weight in STENCIL_LINKS:
@@ -80,7 +80,7 @@ def _stencil_neighbours(shape: tuple[int, int], padding: str):
         else:
             valid = (jy >= 0) & (jy < ny) & (jx >= 0) & (jx < nx)
             jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
-        yield iy, ix, jy, jx, weight, valid
+        yield dy, dx, weight, iy, ix, jy, jx, valid
 
 
 def grow_box(box: Box, by: int, shape: tuple[int, int]) -> Box:
@@ -159,7 +159,7 @@ class SlitCuts:
         source = (grid, tuple(slits) + tuple(edges), scene["domain"])
         solid = geometry.solid_pixels(scene, grid)
         rows, cols, weights = [], [], []
-        for iy, ix, jy, jx, weight, valid in _stencil_neighbours(grid.shape, padding):
+        for _, _, weight, iy, ix, jy, jx, valid in _stencil_neighbours(grid.shape, padding):
             cut = valid & (solid[iy, ix] != solid[jy, jx])
             rows.append((iy * grid.nx_px + ix)[cut])
             cols.append((jy * grid.nx_px + jx)[cut])
@@ -182,18 +182,11 @@ class SlitCuts:
         if not slits:
             return cls.none(grid.shape)
         h = grid.h_px
-        iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
-        px, py = grid.x0 + (ix + 0.5) * h, grid.y0 + (iy + 0.5) * h
         tol = 1e-9 * h
         rows, cols, weights = [], [], []
-        for dy, dx, weight in STENCIL_LINKS:
-            qx, qy = px + dx * h, py + dy * h
-            jy, jx = iy + dy, ix + dx
-            if padding == "replicate":
-                jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
-                valid = (jy != iy) | (jx != ix)  # a link folded onto the pixel itself carries nothing
-            else:
-                valid = (jy >= 0) & (jy < ny) & (jx >= 0) & (jx < nx)
+        for dy, dx, weight, iy, ix, jy, jx, valid in _stencil_neighbours(grid.shape, padding):
+            px, py = grid.x0 + (ix + 0.5) * h, grid.y0 + (iy + 0.5) * h
+            qx, qy = px + dx * h, py + dy * h   # the neighbour where the link points, before any folding
             crossed = np.zeros(grid.shape, dtype=bool)
             for start, end in slits:
                 (sx, sy), (ex, ey) = _extended_slit(start, end, domain, 2.0 * h)

@@ -184,19 +184,9 @@ class AdaptiveMeshProblem:
         (ifenn.fem.supports), selected among the free nodes by their coordinates: the run makes the
         ends of parts and the points nodes of the mesh (supports.anchor_cells)."""
         x = self.free_coordinates
-        fixed, loaded, signs = [], [], []
-        for condition in supports.conditions(self.scene):
-            dofs = 2 * np.flatnonzero(condition.selects(x[:, 0], x[:, 1])) + condition.component
-            if condition.kind in supports.LOADS:
-                loaded.append(dofs)
-                signs.append(np.full(len(dofs), supports.LOADS[condition.kind]))
-            else:
-                fixed.append(dofs)
-        if loaded:
-            self.loaded_dofs, first = np.unique(np.concatenate(loaded), return_index=True)
-            self.load_sign = np.concatenate(signs)[first]   # +1 pulled, -1 pushed the other way ("-load")
-        else:
-            self.loaded_dofs, self.load_sign = np.empty(0, dtype=np.int64), np.empty(0)
+        held = [(2 * np.flatnonzero(c.selects(x[:, 0], x[:, 1])) + c.component, c.kind) for c in supports.conditions(self.scene)]
+        self.loaded_dofs, self.load_sign = supports.loaded_dofs(held)   # sign: +1 pulled, -1 pushed ("-load")
+        fixed = [dofs for dofs, kind in held if kind not in supports.LOADS]
         fixed = np.unique(np.concatenate(fixed)) if fixed else np.empty(0, dtype=np.int64)
         self.fixed_dofs = np.setdiff1d(fixed, self.loaded_dofs)
         self.prescribed = np.concatenate([self.fixed_dofs, self.loaded_dofs]).astype(PETSc.IntType)

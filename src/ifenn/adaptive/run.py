@@ -192,9 +192,8 @@ class AdaptiveRun:
         self.levels = coarsest_levels(self.n_fine[1], self.n_fine[0], self.settings.levels)
         self.slits = fine_slits(self.scene, self.h_fine)
         # the fine cells of the scene's cut-outs: left out of every mesh (ifenn.geometry)
-        centres_y = self.grid.y0 + (np.arange(self.n_fine[0]) + 0.5) * self.h_fine
-        centres_x = self.grid.x0 + (np.arange(self.n_fine[1]) + 0.5) * self.h_fine
-        self.removed = geometry.in_cutout(self.scene, centres_x[None, :], centres_y[:, None]) if self.scene.get("cutouts") else None
+        fine_grid = PixelGrid(self.grid.x0, self.grid.y0, self.h_fine, self.n_fine[1], self.n_fine[0])
+        self.removed = ~geometry.solid_pixels(self.scene, fine_grid) if self.scene.get("cutouts") else None
         Gc, lc = self.material["Gc"], self.material["lc"]
         self.equation = PixelEquation(Gc, lc, self.grid.h_px, "replicate", SlitCuts.for_scene(self.scene, self.grid))
         self.loads = load_control(spec)

@@ -262,7 +262,7 @@ class FractureProblem:
         self.load = fem.Constant(self.domain, PETSc.ScalarType(0.0))
         self.load_reversed = fem.Constant(self.domain, PETSc.ScalarType(0.0))   # "-load": pushed the other way
         zero = fem.Constant(self.domain, PETSc.ScalarType(0.0))
-        self.bcs, loaded, signs = [], [], []
+        self.bcs, held = [], []
         n_owned = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
         for condition in supports.conditions(self.scene):
             def marker(x, condition=condition):
@@ -276,14 +276,8 @@ class FractureProblem:
             dofs = fem.locate_dofs_topological(sub, dim, entities)
             value = {"load": self.load, "-load": self.load_reversed}.get(condition.kind, zero)
             self.bcs.append(fem.dirichletbc(value, dofs, sub))
-            if condition.kind in supports.LOADS:
-                loaded.append(dofs)
-                signs.append(np.full(len(dofs), supports.LOADS[condition.kind]))
-        if loaded:
-            loaded, first = np.unique(np.concatenate(loaded), return_index=True)
-            sign = np.concatenate(signs)[first]
-        else:
-            loaded, sign = np.empty(0, dtype=np.int32), np.empty(0)
+            held.append((dofs, condition.kind))
+        loaded, sign = supports.loaded_dofs(held)
         self._loaded_dofs_with_ghosts = loaded
         self.loaded_dofs = loaded[loaded < n_owned]
         #: +1 on dofs pulled by the load, -1 on those pushed the other way ("-load")

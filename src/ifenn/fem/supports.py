@@ -59,6 +59,16 @@ class Condition:
         return self.edge is None
 
 
+def loaded_dofs(held: list[tuple[np.ndarray, str]]) -> tuple[np.ndarray, np.ndarray]:
+    """The loaded dofs of (dofs, kind) pairs, unique and sorted, with the sign of each (+1 ``load``,
+    -1 ``-load``: the direction the reported force is counted in); fixed ones are left out."""
+    pairs = [(dofs, np.full(len(dofs), LOADS[kind])) for dofs, kind in held if kind in LOADS]
+    if not pairs:
+        return np.empty(0, dtype=np.int64), np.empty(0)
+    dofs, first = np.unique(np.concatenate([d for d, _ in pairs]), return_index=True)
+    return dofs, np.concatenate([sign for _, sign in pairs])[first]
+
+
 def _edge_segment(edge: str, domain: dict, along: tuple[float, float] | None):
     (x0, x1), (y0, y1) = domain["x"], domain["y"]
     if edge in ("bottom", "top"):

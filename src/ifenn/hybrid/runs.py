@@ -179,13 +179,13 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
     return _network_inference(spec, model_path, h_px, shape, device, scale)
 
 
-def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, device="auto"):
+def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, device="auto", service: dict | None = None):
     """The hybrid phase-field step of ``spec`` on ``problem``: its inference (:func:`make_inference`,
     on rank 0), checked and corrected by the pixel equation where ``verification.enabled``."""
     from ifenn.hybrid.pixel_step import PixelPhaseField
 
     verified = bool((spec.get("verification") or {}).get("enabled"))
-    service = network_service(spec, model_path, problem.pixels.h_px)
+    service = service or network_service(spec, model_path, problem.pixels.h_px)
     inference = make_inference(spec, model_path, problem.pixels.h_px, problem.pixels.shape, device, service) if comm.rank == 0 else None
     # the published cap is on the network's input: on another material's H it is cap / scale
     return PixelPhaseField(problem, inference, spec["predictor"] + ("-verified" if verified else ""),
@@ -262,9 +262,9 @@ def ifenn_run(spec: dict, mesh_path, fem_dir, model_path, out_dir, progress: boo
     domain = read_dolfinx_mesh(mesh_path, comm)
     problem = FractureProblem(domain, spec["scene"], spec["material"], spec["petsc"], comm)
     device = network_device(spec, device)
-    step = pixel_phase_field(spec, problem, model_path, comm, device)
-    start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
     service = network_service(spec, model_path, problem.pixels.h_px)
+    step = pixel_phase_field(spec, problem, model_path, comm, device, service)
+    start = {"increment": switch, "state": state, "rows": rows} if switch > 0 else None
     if service["fallback"]:
         logging.getLogger(__name__).warning("%s: the network is left out, the certified pixel step runs: %s", spec["name"], service["fallback"])
     return StaggeredRun(problem, step, spec, out_dir, progress, start=start, row_constants={"hybrid_active": 1},
