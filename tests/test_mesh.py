@@ -38,6 +38,28 @@ def test_vertical_slit_and_snapping(paper_config):
     assert abs(tip - (-0.2)) <= h / 2 and abs((tip + 0.5) / h - round((tip + 0.5) / h)) < 1e-9
 
 
+def test_a_slit_between_mesh_lines_is_refused_unless_it_may_snap(quick_config):
+    """A slit whose tip falls between mesh lines is refused before any job, naming the key; with
+    ``snap: true`` it moves to the nearest line, and the mesh says where."""
+    import copy
+
+    from ifenn.config import ConfigError, validate_config
+
+    config = copy.deepcopy(quick_config)
+    scene = config["scenes"]["slitted"] = copy.deepcopy(config["scenes"]["snt1"])
+    h = element_size(scene)
+    scene["notches"] = [{"kind": "slit", "start": [-0.5, 0.0], "end": [-0.2 + 0.3 * h, 0.0]}]
+    with pytest.raises(ConfigError, match="between mesh lines") as info:
+        validate_config(config, petsc_names=False)
+    assert "config key 'scenes.slitted.notches[0]'" in str(info.value) and "snap: true" in str(info.value)
+    with pytest.raises(ValueError, match="between mesh lines"):
+        build_mesh(scene)
+    scene["notches"][0]["snap"] = True
+    validate_config(config, petsc_names=False)
+    tip = build_mesh(scene).slits[0]["snapped"][1][0]
+    assert abs(tip - (-0.2)) < 1e-12  # 0.3 h off: to the nearest line
+
+
 def test_crossing_slits_are_rejected():
     scene = {"domain": {"x": [0, 1], "y": [0, 1]}, "elements": [10, 10], "boundary": {},
              "notches": [{"kind": "slit", "start": [0.0, 0.5], "end": [0.6, 0.5]},

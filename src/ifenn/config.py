@@ -272,6 +272,13 @@ def _semantic_problems(config: dict, petsc_names: bool = True) -> list[str]:
                 )
             if abs(sx - ex) <= tol and abs(sy - ey) <= tol:
                 problems.append(f"config key '{nkey}': start and end coincide")
+            elif notch["kind"] == "slit" and not notch.get("snap", False):
+                off = [c for c, o in ((sx, x0), (sy, y0), (ex, x0), (ey, y0)) if not geometry.on_grid(c, o, hx)]
+                if off:
+                    problems.append(
+                        f"config key '{nkey}': the slit {notch['start']} -> {notch['end']} has coordinates {off} "
+                        f"between mesh lines (every {hx:g} mm from ({x0:g}, {y0:g})); it is not snapped: move its "
+                        f"ends, change the elements, or set '{nkey}.snap: true' to move it to the nearest line")
     for name, schedule in config["schedules"].items():
         adaptive = schedule.get("adaptive") if isinstance(schedule, dict) else None
         if adaptive and not adaptive["step_min"] <= adaptive["step_initial"] <= adaptive["step_max"] <= adaptive["u_end"]:

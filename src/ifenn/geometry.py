@@ -13,6 +13,13 @@ from __future__ import annotations
 import numpy as np
 
 
+def on_grid(value: float, origin: float, h: float) -> bool:
+    """Whether ``value`` lies on a mesh line of spacing ``h`` from ``origin`` (to round-off).
+    Geometry between mesh lines is refused, never snapped (a slit only with ``snap: true``)."""
+    steps = (value - origin) / h
+    return abs(steps - round(steps)) < 1e-6
+
+
 def cutouts(scene: dict) -> list[tuple[float, float, float, float]]:
     """The scene's cut-outs as (x0, x1, y0, y1), mm."""
     return [(min(c["x"]), max(c["x"]), min(c["y"]), max(c["y"])) for c in scene.get("cutouts", [])]
@@ -61,7 +68,7 @@ def cutout_problems(scene: dict, key: str) -> list[str]:
         if not (x0 - 1e-12 <= a and b <= x1 + 1e-12 and y0 - 1e-12 <= c and d <= y1 + 1e-12):
             found.append(f"{ckey}: {cut} reaches outside the domain x in [{x0}, {x1}], y in [{y0}, {y1}]")
             continue
-        off = [v for v, origin in ((a, x0), (b, x0), (c, y0), (d, y0)) if abs((v - origin) / h - round((v - origin) / h)) > 1e-6]
+        off = [v for v, origin in ((a, x0), (b, x0), (c, y0), (d, y0)) if not on_grid(v, origin, h)]
         if off:
             found.append(f"{ckey}: its edges {off} are not on mesh lines (every {h:g} mm from ({x0:g}, {y0:g})); "
                          "a cut-out is not snapped: move its edges or change the elements")

@@ -12,7 +12,7 @@ cells that share an edge lie in leaves one level apart at most (2:1 balance). Th
 node is the midpoint of one coarser leaf's edge, tied to its two ends (u_hanging = (u_a +
 u_b) / 2): bilinear on that edge, so the displacement is continuous (a conforming Q1 space).
 
-Slits (snapped to the scene's element grid, as :func:`ifenn.fem.mesh.build_mesh`) are kept open
+Slits (on the scene's element grid, as :func:`ifenn.fem.mesh.build_mesh`) are kept open
 as there: the nodes on a slit are doubled and the leaves on its upper (horizontal) or right
 (vertical) side use the twins; a tip inside the domain stays shared. So that no leaf straddles a
 slit, the fine cells along it need the level at which the slit's line and ends are block edges;

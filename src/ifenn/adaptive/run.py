@@ -109,7 +109,8 @@ class MeshSettings:
 
 
 def fine_slits(scene: dict, h_fine: float) -> list[FineSlit]:
-    """The scene's slits, snapped to its element grid as the uniform mesh's
+    """The scene's slits on its element grid (moved to the nearest line where a slit says
+    ``snap: true``), as the uniform mesh's
     (:func:`ifenn.fem.mesh.build_mesh`), in fine-cell units."""
     from ifenn.fem.mesh import _snap, element_size
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ifenn import geometry
+from ifenn.geometry import on_grid
 from ifenn.io import atomic_path, reading
 
 
@@ -89,6 +90,10 @@ def build_mesh(scene: dict) -> StructuredMesh:
         if notch["kind"] != "slit":
             continue
         (sx, sy), (ex, ey) = notch["start"], notch["end"]
+        off_grid = [c for c, o in ((sx, x0), (sy, y0), (ex, x0), (ey, y0)) if not on_grid(c, o, h)]
+        if off_grid and not notch.get("snap", False):
+            raise ValueError(f"slit {notch} has coordinates {off_grid} between mesh lines (h = {h:g} mm); "
+                             "it is snapped only with 'snap: true'")
         horizontal = abs(sy - ey) <= abs(sx - ex)
         if horizontal:
             line = _snap(sy, y0, h, ny)

@@ -30,6 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ifenn import geometry
+from ifenn.geometry import on_grid
+
 EDGES = ("left", "right", "bottom", "top")
 COMPONENTS = {"x": 0, "y": 1}
 #: the kinds that follow the load, with the sign of the prescribed displacement
@@ -107,11 +110,6 @@ def conditions(scene: dict, key: str = "scene") -> list[Condition]:
     return found
 
 
-def _on_grid(value: float, origin: float, h: float) -> bool:
-    steps = (value - origin) / h
-    return abs(steps - round(steps)) < 1e-6
-
-
 def problems(scene: dict, key: str) -> list[str]:
     """What is wrong with the scene's supports and loads, one message per problem naming the key:
     a part off its edge or with its ends between mesh nodes, a point off the mesh's nodes, no load,
@@ -133,7 +131,7 @@ def problems(scene: dict, key: str) -> list[str]:
             pkey = f"config key '{key}.boundary.{edge}[{i}].range'"
             if not (low - 1e-12 <= a < b <= high + 1e-12):
                 found.append(f"{pkey}: {part['range']} must be an interval within the edge, [{low}, {high}], with a < b")
-            elif not (_on_grid(a, origin, h) and _on_grid(b, origin, h)):
+            elif not (on_grid(a, origin, h) and on_grid(b, origin, h)):
                 found.append(f"{pkey}: its ends {part['range']} must lie on mesh nodes (every {h:g} mm from {origin:g}); "
                              "a support or load between nodes is not snapped: move its ends or change the elements")
     for i, point in enumerate(scene["boundary"].get("points", [])):
@@ -141,7 +139,7 @@ def problems(scene: dict, key: str) -> list[str]:
         pkey = f"config key '{key}.boundary.points[{i}].at'"
         if not (x0 - 1e-12 <= px <= x1 + 1e-12 and y0 - 1e-12 <= py <= y1 + 1e-12):
             found.append(f"{pkey}: {point['at']} lies outside the domain x in [{x0}, {x1}], y in [{y0}, {y1}]")
-        elif not (_on_grid(px, x0, h) and _on_grid(py, y0, h)):
+        elif not (on_grid(px, x0, h) and on_grid(py, y0, h)):
             found.append(f"{pkey}: {point['at']} is not a mesh node (nodes every {h:g} mm from ({x0:g}, {y0:g})); "
                          "a point support is not snapped: move it or change the elements")
     if found:
@@ -169,7 +167,6 @@ def problems(scene: dict, key: str) -> list[str]:
 def _segment_problems(scene: dict, segments: list[dict], key: str, h: float) -> list[str]:
     """Segments must be horizontal or vertical, end on mesh nodes inside the domain, and lie on the
     solid's boundary: solid on exactly one side all along."""
-    from ifenn import geometry
 
     (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
     found = []
@@ -182,7 +179,7 @@ def _segment_problems(scene: dict, segments: list[dict], key: str, h: float) -> 
         if not all(x0 - 1e-12 <= x <= x1 + 1e-12 for x in (ax, bx)) or not all(y0 - 1e-12 <= y <= y1 + 1e-12 for y in (ay, by)):
             found.append(f"{skey}: it reaches outside the domain x in [{x0}, {x1}], y in [{y0}, {y1}]")
             continue
-        if not all(_on_grid(v, o, h) for v, o in ((ax, x0), (bx, x0), (ay, y0), (by, y0))):
+        if not all(on_grid(v, o, h) for v, o in ((ax, x0), (bx, x0), (ay, y0), (by, y0))):
             found.append(f"{skey}: its ends must lie on mesh nodes (every {h:g} mm from ({x0:g}, {y0:g})); it is not snapped")
             continue
         n = int(round(max(abs(bx - ax), abs(by - ay)) / h))
@@ -201,7 +198,6 @@ def _segment_problems(scene: dict, segments: list[dict], key: str, h: float) -> 
 
 def _solid_nodes_on(scene: dict, condition: Condition, h: float) -> np.ndarray:
     """The mesh nodes (n, 2) on a condition's part, or its point, that belong to a solid cell."""
-    from ifenn import geometry
 
     (ax, ay), (bx, by) = condition.start, condition.end
     n = int(round(max(abs(bx - ax), abs(by - ay)) / h))
