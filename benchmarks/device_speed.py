@@ -1,11 +1,18 @@
 """The GPU figures in one run, per device side by side (the CPU, and CUDA where torch sees
 one): training of the default PICNN preset, the network on the whole image, and the verified
 phase-field step (check + multigrid-PCG correction) on a crack growing across an image of
-snt3's size. Self-contained: it needs torch, numpy, scipy, pandas and pyyaml, no dolfinx and no
-results/ (the prepared script for a GPU machine):
+snt3's size. Self-contained: it needs torch, numpy, scipy, pandas and pyyaml, nothing else (no
+dolfinx, no tqdm, no results/; the compiled CPU step also a C compiler): the prepared script for a
+GPU machine:
 
     PYTHONPATH=src OMP_NUM_THREADS=1 python3 benchmarks/device_speed.py [--pixels 600] [--increments 30]
         [--devices cpu cuda] [--training-pixels 400] [--cpu-epochs 50] [--out results/benchmarks/device_speed.csv]
+
+On a lent GPU, ``--devices cuda`` is the preset to run (a few minutes): the CUDA rows only (no CPU
+training, no compiled CPU step), training of the whole default preset, the network at 400-4800 px,
+and the verified step at snt1's and snt3's image sizes (400 and 600 px). Each timed part on CUDA
+is preceded by an untimed warm-up (cuDNN picks its algorithms, the caching allocator fills), so the
+numbers are steady-state ones.
 
 What each row is (column ``part``):
 
@@ -62,6 +69,7 @@ def crack_sequence(n_px: int, increments: int, lc: float) -> list[np.ndarray]:
 
 
 def training_rows(devices, settings_name: str, n_px: int, cpu_epochs: int, Gc: float, lc: float):
+    """Per device: the preset's training wall (a CUDA one after a one-epoch warm-up, untimed)."""
     from ifenn.device import describe
     from ifenn.network.settings import resolve_settings
     from ifenn.network.training import synthetic_history, train_picnn
@@ -75,6 +83,9 @@ def training_rows(devices, settings_name: str, n_px: int, cpu_epochs: int, Gc: f
         short = device.type == "cpu" and cpu_epochs < epochs
         if short:
             settings["epochs"], settings["full_image_epochs"] = cpu_epochs, 0
+        if device.type == "cuda":   # warm-up: cuDNN's algorithm choice and the allocator, untimed
+            train_picnn(maps, h_px, Gc, lc, {**settings, "epochs": 1, "full_image_epochs": 0}, seed=0, threads=1,
+                        progress=False, device=device)
         model, log = train_picnn(maps, h_px, Gc, lc, settings, seed=0, threads=1, progress=False, device=device)
         wall = float(log.wall_s.iloc[-1])
         rows.append({"part": "training", "device": describe(device), "what": f"preset {settings_name}, {n_px} px",
@@ -109,7 +120,11 @@ def network_rows(model, devices, sizes, gpu_sizes=()):
     return rows
 
 
-def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: float, lc: float, history_cap: float, sigma: float):
+def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: float, lc: float, history_cap: float, sigma: float,
+                  compiled: bool = True):
+    """Per variant (the compiled CPU step where ``compiled``, the torch step per device) and warm
+    start: the step's median time over a growing crack (the first, cold step untimed; on CUDA
+    the whole sequence run once untimed before, as a warm-up)."""
     from ifenn.device import describe
     from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
     from ifenn.hybrid.process_zone import ProcessZoneInference
@@ -120,7 +135,7 @@ def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: fl
     h_px = 1.0 / n_px
     settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"])
     rows = []
-    variants = [("compiled", torch.device("cpu"))] + [("torch", device) for device in devices]
+    variants = ([("compiled", torch.device("cpu"))] if compiled else []) + [("torch", device) for device in devices]
     for (backend, device), warm_start in ((v, w) for v in variants for w in ("previous", "increment")):
         if backend == "compiled":   # the workflow's CPU step: the network in its orbit kernel, asked on the process zone
             network = None
@@ -133,6 +148,11 @@ def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: fl
             step = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start, history_cap,
                                            sigma=sigma, network_tolerance=verification["network_tolerance"])
         times, iterations, certificate = [], [], 0.0
+        if device.type == "cuda":   # warm-up on a fresh step of the same kind (graphs captured, kernels chosen)
+            warm = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start,
+                                           history_cap, sigma=sigma, network_tolerance=verification["network_tolerance"])
+            for history in images[:3]:
+                warm(history)
         for k, history in enumerate(images):
             _sync(device)
             started = time.perf_counter()
@@ -152,10 +172,21 @@ def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: fl
     return rows
 
 
+def preset(args: argparse.Namespace) -> argparse.Namespace:
+    """The defaults that depend on --devices: CUDA alone (the lent GPU's preset) runs no CPU part
+    and the verified step at 400 and 600 px; otherwise the compiled CPU step too, at 600 px."""
+    cuda_only = args.devices == ["cuda"]
+    args.compiled = not cuda_only
+    if args.pixels is None:
+        args.pixels = [400, 600] if cuda_only else [600]
+    return args
+
+
 def main() -> int:
     cli = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     cli.add_argument("--config", default=str(REPO / "config" / "config.yaml"))
-    cli.add_argument("--pixels", type=int, default=600, help="the verified step's image side (snt3: 600)")
+    cli.add_argument("--pixels", type=int, nargs="+", default=None,
+                     help="the verified step's image sides (default 600, snt3's; with --devices cuda alone 400 600)")
     cli.add_argument("--increments", type=int, default=30)
     cli.add_argument("--training-pixels", type=int, default=400, help="the training maps' side (snt1-I: 400)")
     cli.add_argument("--cpu-epochs", type=int, default=50, help="epochs run on the CPU (extrapolated to the preset's)")
@@ -164,7 +195,7 @@ def main() -> int:
     cli.add_argument("--devices", nargs="+", default=None, choices=["cpu", "cuda"],
                      help="default: cpu, and cuda where torch sees one")
     cli.add_argument("--out", default="results/benchmarks/device_speed.csv")
-    args = cli.parse_args()
+    args = preset(cli.parse_args())
     from ifenn.device import default_devices, resolve_device
     from ifenn.io import atomic_path
 
@@ -176,9 +207,10 @@ def main() -> int:
     rows, models = training_rows(devices, config["picnn"]["preset"], args.training_pixels, args.cpu_epochs, Gc, lc)
     model = models.get("cuda", models["cpu"] if "cpu" in models else next(iter(models.values())))
     rows += network_rows(model, devices, args.network_sizes, args.gpu_network_sizes)
-    images = crack_sequence(args.pixels, args.increments, lc)
-    rows += verified_rows(model, devices, images, ifenn["verification"], ifenn["process_zone"], Gc, lc, ifenn["history_cap"],
-                         ifenn["smoothing_sigma"])
+    for pixels in args.pixels:
+        images = crack_sequence(pixels, args.increments, lc)
+        rows += verified_rows(model, devices, images, ifenn["verification"], ifenn["process_zone"], Gc, lc, ifenn["history_cap"],
+                              ifenn["smoothing_sigma"], compiled=args.compiled)
     table = pd.DataFrame(rows)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(args.out) as tmp:

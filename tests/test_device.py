@@ -27,9 +27,26 @@ def test_settings_resolve_and_bad_ones_name_the_key():
     if not CUDA:
         with pytest.raises(ValueError, match="sees no CUDA device"):
             resolve_device("cuda")
-    assert describe("cpu") == "cpu" and device_record(torch.device("cpu")) == {"network_device": "cpu"}
+    assert describe("cpu") == "cpu"
+    assert device_record(torch.device("cpu")) == {"network_device": "cpu", "float32_precision": {"cudnn_conv": "ieee", "cuda_matmul": "ieee"}}
     # runs without the network never resolve a device (nor import torch for it)
     assert network_device({"predictor": "exact_pixel"}, "cuda") is None and device_record(None) == {}
+
+
+def test_resolving_a_device_sets_full_float32_precision(monkeypatch):
+    """torch's default runs float32 cuDNN convolutions in TF32 (10 mantissa bits) on Ampere and later
+    GPUs; once a device is resolved, convolutions and matrix products run in IEEE float32, on every
+    device, and provenance says so."""
+    from ifenn.device import float32_precision
+
+    torch.backends.cudnn.conv.fp32_precision = "tf32"
+    torch.backends.cuda.matmul.fp32_precision = "tf32"
+    assert float32_precision() == {"cudnn_conv": "tf32", "cuda_matmul": "tf32"}
+    resolve_device("cpu")
+    assert float32_precision() == {"cudnn_conv": "ieee", "cuda_matmul": "ieee"}
+    torch.backends.cudnn.conv.fp32_precision = "tf32"
+    resolve_device(torch.device("cpu"))   # a device resolved before, handed down: the setting holds too
+    assert float32_precision()["cudnn_conv"] == "ieee" and torch.get_float32_matmul_precision() == "highest"
 
 
 def test_cuda_without_one_is_refused_before_any_job(paper_config):

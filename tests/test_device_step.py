@@ -81,6 +81,43 @@ def test_the_port_solves_the_cut_equation_to_its_certificate():
     assert phi[row, 5] - phi[row - 1, 5] > 0.7
 
 
+def test_the_sums_over_repeated_indices_need_no_atomics(monkeypatch):
+    """On a GPU, index_add over repeated indices is an atomic add (its order, so its bits, vary from
+    run to run). The step sums them as gathers in a fixed order instead: the restriction is the
+    prolongation's transpose (<P^T r, x> = <r, P x>), and the cut equation solves with index_add
+    unavailable, to the same phi and iterations as before, bit for bit on a rerun."""
+    from ifenn.hybrid.device_step import DeviceMultigrid
+
+    n = 64
+    h_px, cuts = _slit_scene(n)
+    history = torch.as_tensor(_shear_history(n))
+    grid = DeviceMultigrid((n, n - 3), (True, False, True, True), [None], "cpu")
+    rng = np.random.default_rng(1)
+    for k in range(len(grid.levels) - 1):
+        r = torch.as_tensor(rng.random(grid.levels[k].shape), dtype=torch.float32)
+        x = torch.as_tensor(rng.random(grid.levels[k + 1].shape), dtype=torch.float32)
+        lhs, rhs = float(torch.sum(grid._restrict(k, r) * x)), 0.25 * float(torch.sum(r * grid._prolong(k, x)))
+        assert abs(lhs - rhs) <= 1e-5 * abs(rhs), k
+
+    def solve():
+        phi = torch.zeros((n, n), dtype=torch.float64)
+        port = DevicePixelEquation(GC, LC, h_px, "replicate", cuts)
+        worst, iterations = port.solve_box(phi, history, (slice(0, n), slice(0, n)), 1e-5)
+        return phi, worst, iterations, port.residual(phi, history)
+
+    reference = solve()
+
+    def atomic(*args, **kwargs):
+        raise AssertionError("index_add: an atomic add on a GPU")
+
+    monkeypatch.setattr(torch.Tensor, "index_add_", atomic)
+    monkeypatch.setattr(torch.Tensor, "index_add", atomic)
+    monkeypatch.setattr(torch, "index_add", atomic)
+    first, second = solve(), solve()
+    assert first[2] == reference[2] and first[1] <= 1e-5
+    assert torch.equal(first[0], second[0]) and torch.equal(first[3], second[3])
+
+
 def _spoiled_network():
     torch.manual_seed(0)
     net = PICNN(padding="replicate", input_scaling=InputScaling("log", 0.01, 45.0), init_gain=2.0).eval()
@@ -176,7 +213,8 @@ def test_the_device_benchmark_runs_without_dolfinx(tmp_path):
 
     from ifenn.config import REPO
 
-    blocked = "import sys, runpy\nfor m in ('dolfinx', 'petsc4py', 'mpi4py', 'jsonschema', 'ufl', 'h5py'): sys.modules[m] = None\n"
+    blocked = ("import sys, runpy\nfor m in ('dolfinx', 'petsc4py', 'mpi4py', 'jsonschema', 'ufl', 'h5py', 'tqdm', 'matplotlib', "
+               "'meshio', 'snakemake'): sys.modules[m] = None\n")
     script = REPO / "benchmarks" / "device_speed.py"
     out = tmp_path / "device_speed.csv"
     args = ["--pixels", "120", "--increments", "4", "--training-pixels", "64", "--cpu-epochs", "3", "--network-sizes", "64",
@@ -192,3 +230,21 @@ def test_the_device_benchmark_runs_without_dolfinx(tmp_path):
     for warm_start in ("previous", "increment") if _kernel() is not None else ():   # the compiled step's own algorithm
         compiled, port = verified.loc[f"compiled, warm start {warm_start}"], verified.loc[f"torch, warm start {warm_start}"]
         assert compiled.cg_iterations == port.cg_iterations and compiled.max_certificate == pytest.approx(port.max_certificate, rel=1e-3)
+
+
+def test_the_gpu_preset_of_the_device_benchmark():
+    """``--devices cuda`` alone is the lent GPU's preset: no CPU part (training, compiled step), the
+    verified step at snt1's and snt3's image sizes; otherwise the compiled step is timed beside."""
+    import argparse
+    import importlib.util
+
+    from ifenn.config import REPO
+
+    spec = importlib.util.spec_from_file_location("device_speed", REPO / "benchmarks" / "device_speed.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    gpu = module.preset(argparse.Namespace(devices=["cuda"], pixels=None))
+    assert gpu.pixels == [400, 600] and not gpu.compiled
+    both = module.preset(argparse.Namespace(devices=None, pixels=None))
+    assert both.pixels == [600] and both.compiled
+    assert module.preset(argparse.Namespace(devices=["cuda"], pixels=[1200])).pixels == [1200]

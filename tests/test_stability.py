@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from ifenn.errors import NonFiniteResultError, SolverDivergedError
 from ifenn.run_files import FIELDS, write_fields
 from ifenn.studies.stability import cell_metrics, cells, classify, table_rows
 
@@ -75,3 +76,30 @@ def test_sweep_cells_of_the_paper_config(paper_config):
     rows = table_rows(paper_config)
     assert {r["panel"] for r in rows} == {"load step", "lc/h", "IFENN option"}
     assert all(r["cell"] in all_cells and r["reference"] in all_cells for r in rows)
+
+
+@pytest.mark.parametrize("error, labelled", [
+    (SolverDivergedError("phase-field solve diverged: KSP_DIVERGED_ITS"), True),
+    (NonFiniteResultError("non-finite result"), True),
+    (RuntimeError("CUDA out of memory. Tried to allocate 2.00 GiB"), False),
+    (ValueError("config key 'x': bad"), False),
+])
+def test_only_the_solvers_own_failure_is_labelled_diverged(quick_config, tmp_path, monkeypatch, error, labelled):
+    """A cell says 'diverged' for the solver's own exception only; a foreign RuntimeError (a CUDA
+    out-of-memory) or any other error fails the job with its message instead of a label."""
+    import ifenn.fem.solver
+    from ifenn.studies.stability import run_cell
+
+    def failing(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(ifenn.fem.solver, "run_fem", failing)
+    spec = next(c["spec"] for c in cells(quick_config).values() if c["method"] == "fem")
+    if labelled:
+        status = run_cell(spec, tmp_path / "cell")
+        assert status["status"] == "diverged" and str(error) in status["error"]
+        assert json.loads((tmp_path / "cell" / "status.json").read_text())["status"] == "diverged"
+    else:
+        with pytest.raises(type(error), match=str(error).split(".")[0]):
+            run_cell(spec, tmp_path / "cell")
+        assert not (tmp_path / "cell" / "status.json").exists()

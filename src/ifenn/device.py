@@ -6,7 +6,14 @@ in torch (:mod:`ifenn.hybrid.device_step`: H up once, phi down once). The exact 
 (a sparse direct solve) stays on the CPU.
 
 The setting is not part of a run's spec (a spec says what is computed, the device where): a
-run's provenance.json records the device that computed it (:func:`describe`).
+run's provenance.json records the device that computed it (:func:`describe`) and the float32
+precision its convolutions and matrix products ran at (:func:`float32_precision`).
+
+Full float32 precision: torch runs float32 cuDNN convolutions in TF32 by default on Ampere and
+later GPUs (10 mantissa bits). The network's phi would then differ from the CPU's by ~1e-4, and the
+float32 V-cycle, whose stencil sums nearly cancelling terms, would lose precision (CG would need
+more iterations). :func:`resolve_device` sets IEEE float32 for cuDNN convolutions and CUDA matrix
+products, once, for every device, before anything runs.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ def resolve_device(setting="auto", key: str = "device"):
     ``cuda`` without a CUDA device is refused naming ``key``, the value and what is allowed."""
     import torch
 
+    full_float32_precision()
     if isinstance(setting, torch.device):
         return setting
     setting = "auto" if setting is None else setting
@@ -36,6 +44,26 @@ def resolve_device(setting="auto", key: str = "device"):
         # deterministic cuBLAS (training runs under torch.use_deterministic_algorithms)
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     return torch.device(setting)
+
+
+#: torch's float32 precision settings (new API only: mixing it with the legacy allow_tf32 flags is
+#: an error in the pinned torch) -> the value that means full IEEE float32
+FLOAT32_SETTINGS = {"cudnn_conv": ("cudnn", "conv"), "cuda_matmul": ("cuda", "matmul")}
+
+
+def full_float32_precision() -> None:
+    """IEEE float32 (no TF32) for cuDNN convolutions and CUDA matrix products (module doc)."""
+    import torch
+
+    torch.backends.cudnn.conv.fp32_precision = "ieee"
+    torch.backends.cuda.matmul.fp32_precision = "ieee"
+
+
+def float32_precision() -> dict:
+    """The float32 precision in force: {'cudnn_conv': 'ieee' | 'tf32' | ..., 'cuda_matmul': ...}."""
+    import torch
+
+    return {name: getattr(getattr(torch.backends, backend), op).fp32_precision for name, (backend, op) in FLOAT32_SETTINGS.items()}
 
 
 def describe(device) -> str:
@@ -56,7 +84,7 @@ def network_device(spec: dict, device="auto"):
 
 def device_record(device) -> dict:
     """provenance.json's record of where the network ran ({} without a network)."""
-    return {} if device is None else {"network_device": describe(device)}
+    return {} if device is None else {"network_device": describe(device), "float32_precision": float32_precision()}
 
 
 def default_devices() -> list:

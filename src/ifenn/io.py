@@ -94,9 +94,25 @@ def log_to(path: str | Path):
     return stream
 
 
+class _NoBar:
+    """What a disabled bar does: nothing (and it needs no tqdm)."""
+
+    def update(self, n=1):
+        pass
+
+    def set_postfix(self, *args, **kwargs):
+        pass
+
+    def close(self):
+        pass
+
+
 def progress_bar(**options):
     """A tqdm bar that refreshes twice a second on a terminal and every 30 s into a file (a
-    rule's log), so a log holds a few lines per minute, not one per update."""
+    rule's log), so a log holds a few lines per minute, not one per update. A disabled bar
+    (``disable=True``) does not import tqdm: the GPU benchmark runs where it is not installed."""
+    if options.get("disable"):
+        return _NoBar()
     from tqdm import tqdm
 
     interactive = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()

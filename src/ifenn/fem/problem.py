@@ -21,15 +21,12 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from ifenn import geometry
+from ifenn.errors import SolverDivergedError  # noqa: F401 (raised here; importers take it from here too)
 from ifenn.fem import physics, supports
 from ifenn.pixels import PixelGrid
 
 QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
 EDGE_COMPONENT = {"x": 0, "y": 1}
-
-
-class SolverDivergedError(RuntimeError):
-    """A linear solve failed; the message names the increment, the field and PETSc's reason."""
 
 
 _REASONS = {getattr(PETSc.KSP.ConvergedReason, k): k for k in dir(PETSc.KSP.ConvergedReason) if not k.startswith("_")}

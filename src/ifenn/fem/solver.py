@@ -28,6 +28,7 @@ from mpi4py import MPI
 
 from ifenn import run_files
 from ifenn.config import spec_hash
+from ifenn.errors import NonFiniteResultError
 from ifenn.fem.loading import largest_change, load_control
 from ifenn.io import progress_bar, provenance
 
@@ -271,7 +272,7 @@ class StaggeredRun:
         p.accept_increment()
         force, phi_max = p.reaction_force(), self.phase_field.phase_field_max()
         if not (np.isfinite(force) and np.isfinite(phi_max)):
-            raise FloatingPointError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
+            raise NonFiniteResultError(f"non-finite result: reaction force {force}, phi_max {phi_max}")
         adaptive = {"rejected_steps": loads.rejected, "rejected_iterations": rejected_iterations} if loads.adaptive else {}
         return {"increment": increment, "u": u, "reaction_force": force, "phi_max": phi_max, "stagger_iterations": iterations,
                 **clock.times, "t_increment_s": clock.elapsed(), **adaptive, **self.phase_field.timings, **self.row_constants}

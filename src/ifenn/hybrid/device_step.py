@@ -24,6 +24,13 @@ evaluated on the whole image each call (no process zone), and the failing pixels
 in one box per round (their bounding box grown by the margin; the whole image past
 ``GLOBAL_FRACTION``). The certificate is the same: max |r| <= tolerance over the whole image, or
 the step is reported (``residual_after``).
+
+Deterministic on a GPU: every sum over repeated indices (the restriction P^T, the cut links of a
+pixel that loses several) is a gather over a fixed table of contributors summed in a fixed order
+(:class:`_LinkSum`, :func:`_transpose`), never an atomic add, so a rerun on the same GPU gives the
+same bits and the same CG iteration counts. A step's scalars (the certificates, the failing share,
+the box of the failing pixels) come to the host together, one transfer each time the loop needs
+them; the smoothing's kernel and index go up once per image size.
 """
 
 from __future__ import annotations
@@ -36,6 +43,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ifenn.errors import SolverDivergedError
 from ifenn.hybrid.verification import _DEFAULTS, WARM_STARTS
 from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
 
@@ -62,6 +70,31 @@ def _ghosted(x: torch.Tensor, replicate: tuple[bool, bool, bool, bool]) -> torch
     return ext
 
 
+class _LinkSum:
+    """Sums of values per repeated index without atomics: ``rows`` (the pixel of each link) ->
+    the distinct pixels ``index`` and a (len(index), K) table of their links (padded with a slot
+    that reads 0); ``sums(values)`` adds each pixel's links in a fixed order (a gather and a sum)."""
+
+    def __init__(self, rows, device):
+        rows = np.asarray(rows, dtype=np.int64)
+        order = np.argsort(rows, kind="stable")
+        index, starts, counts = np.unique(rows[order], return_index=True, return_counts=True)
+        table = np.full((len(index), int(counts.max()) if len(counts) else 0), len(rows), dtype=np.int64)
+        for k in range(table.shape[1]):
+            has = counts > k
+            table[has, k] = order[starts[has] + k]
+        self.index = torch.as_tensor(index, device=device)
+        self.table = torch.as_tensor(table, device=device)
+
+    def sums(self, values: torch.Tensor) -> torch.Tensor:
+        return torch.cat([values, values.new_zeros(1)])[self.table].sum(dim=1)
+
+    def add_to(self, flat: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+        """``flat`` with each link's value added at its pixel (``flat`` a fresh 1-D tensor: written in place)."""
+        flat[self.index] = flat[self.index] + self.sums(values)
+        return flat
+
+
 class _Level:
     """One multigrid level of a box: its shape, ghosts, cut links and (per call) coefficients."""
 
@@ -76,6 +109,7 @@ class _Level:
             # a link to beyond the box reads the Dirichlet data, 0: its weight is kept off the diagonal only
             self.cut_w = torch.as_tensor(np.asarray(weights, dtype=np.float64), dtype=dtype, device=device)
             self.link_w = torch.as_tensor(np.where(np.asarray(cols) >= 0, weights, 0.0), dtype=dtype, device=device)
+            self.links = _LinkSum(rows, device)
         self.D = 0.0
         # written in place per solve: a captured CUDA graph reads them where they are
         self.a = torch.zeros(self.shape, dtype=dtype, device=device)
@@ -87,7 +121,7 @@ class _Level:
         self.a.copy_(a)
         torch.add(self.a, 3.0 * D, out=self.diag)
         if self.n_cut:
-            self.diag.view(-1).index_add_(0, self.rows, -D * self.cut_w)
+            self.links.add_to(self.diag.view(-1), -D * self.cut_w)
         torch.reciprocal(self.diag, out=self.inv)
 
     def apply(self, x: torch.Tensor) -> torch.Tensor:
@@ -95,7 +129,7 @@ class _Level:
         neighbours = F.conv2d(_ghosted(x, self.replicate)[None, None], self.stencil)[0, 0]
         out = self.diag * x - self.D * neighbours
         if self.n_cut:  # the cut links' neighbour terms back out: (A_cut x)_i = diag_cut x_i - D (K9* x)_i + D w x_j
-            out = out.reshape(-1).index_add(0, self.rows, self.D * self.link_w * x.reshape(-1)[self.cols]).reshape(self.shape)
+            out = self.links.add_to(out.reshape(-1), self.D * self.link_w * x.reshape(-1)[self.cols]).reshape(self.shape)
         return out
 
     def jacobi(self, b: torch.Tensor, sweeps: int, x: torch.Tensor | None = None) -> torch.Tensor:
@@ -126,6 +160,25 @@ def _transfer(nf: int, nc: int, rep_low: bool, rep_high: bool, device) -> tuple[
     return torch.as_tensor(index, device=device), torch.as_tensor(weight, dtype=torch.float32, device=device)
 
 
+def _transpose(transfer: tuple[torch.Tensor, torch.Tensor], n_coarse: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The transpose of a transfer (fine i takes weight[i, s] of coarse index[i, s]) as a gather:
+    (n_coarse, K) fine indices each coarse cell receives from and their weights (padding: weight 0),
+    so that P^T is a fixed-order sum (no atomics)."""
+    index, weight = (t.cpu().numpy() for t in transfer)
+    entries = [[] for _ in range(n_coarse)]
+    for i in range(len(index)):
+        for s in range(2):
+            if weight[i, s] != 0.0:
+                entries[int(index[i, s])].append((i, weight[i, s]))
+    width = max(len(e) for e in entries)
+    fine, weights = np.zeros((n_coarse, width), np.int64), np.zeros((n_coarse, width), np.float32)
+    for c, e in enumerate(entries):
+        for k, (i, w) in enumerate(e):
+            fine[c, k], weights[c, k] = i, w
+    device = transfer[0].device
+    return torch.as_tensor(fine, device=device), torch.as_tensor(weights, device=device)
+
+
 class DeviceMultigrid:
     """The V-cycle of one box (shape, edges, cut links per level), float32 on ``device``: the
     preconditioner of :meth:`DevicePixelEquation.solve_box` (module doc)."""
@@ -137,11 +190,13 @@ class DeviceMultigrid:
             coarse = ((n + 1) // 2, (m + 1) // 2)
             k = len(self.levels)
             self.levels.append(_Level(coarse, replicate, level_links[k] if k < len(level_links) else None, torch.float32, device))
-        self.rows, self.cols, self.children = [], [], []
+        self.rows, self.cols, self.rows_t, self.cols_t, self.children = [], [], [], [], []
         for fine, coarse in zip(self.levels[:-1], self.levels[1:], strict=True):
             (nf, mf), (nc, mc) = fine.shape, coarse.shape
             self.rows.append(_transfer(nf, nc, replicate[0], replicate[1], device))
             self.cols.append(_transfer(mf, mc, replicate[2], replicate[3], device))
+            self.rows_t.append(_transpose(self.rows[-1], nc))
+            self.cols_t.append(_transpose(self.cols[-1], mc))
             # the (up to 4) children of each coarse cell: an odd edge counts its last row / column twice
             i0 = torch.arange(nc, device=device) * 2
             j0 = torch.arange(mc, device=device) * 2
@@ -158,13 +213,10 @@ class DeviceMultigrid:
                 D = D / 4.0
 
     def _restrict(self, k: int, r: torch.Tensor) -> torch.Tensor:
-        """P^T r / 4, separably (rows, then columns)."""
-        (row_i, row_w), (col_i, col_w) = self.rows[k], self.cols[k]
-        nc, mc = self.levels[k + 1].shape
-        t = torch.zeros((nc, r.shape[1]), dtype=r.dtype, device=r.device)
-        t.index_add_(0, row_i[:, 0], 0.25 * row_w[:, :1] * r).index_add_(0, row_i[:, 1], 0.25 * row_w[:, 1:] * r)
-        out = torch.zeros((nc, mc), dtype=r.dtype, device=r.device)
-        return out.index_add_(1, col_i[:, 0], col_w[:, 0] * t).index_add_(1, col_i[:, 1], col_w[:, 1] * t)
+        """P^T r / 4, separably (rows, then columns), each as a gather over the transposed transfer."""
+        (row_i, row_w), (col_i, col_w) = self.rows_t[k], self.cols_t[k]
+        t = (0.25 * row_w[:, :, None] * r[row_i]).sum(dim=1)          # (nc, m): row_i (nc, K)
+        return (col_w[None, :, :] * t[:, col_i]).sum(dim=2)          # (nc, mc): col_i (mc, K)
 
     def _prolong(self, k: int, x: torch.Tensor) -> torch.Tensor:
         """P x, separably."""
@@ -286,7 +338,8 @@ class DevicePixelEquation:
         self._cuts_t = None
         if self.cuts is not None:
             self._cuts_t = (torch.as_tensor(self.cuts.rows, device=self.device), torch.as_tensor(self.cuts.cols, device=self.device),
-                            torch.as_tensor(self.cuts.weights, dtype=torch.float64, device=self.device))
+                            torch.as_tensor(self.cuts.weights, dtype=torch.float64, device=self.device),
+                            _LinkSum(self.cuts.rows, self.device))
         self._grids: dict = {}   # box -> its CG (finest level in float64, multigrid, buffers, graph)
 
     def residual(self, phi: torch.Tensor, history: torch.Tensor, normalised: bool = True) -> torch.Tensor:
@@ -296,9 +349,9 @@ class DevicePixelEquation:
         a = self.reaction0 + 2.0 * history
         residual = a * phi - self.diffusion * (neighbours - 3.0 * phi) - 2.0 * history
         if self._cuts_t is not None:
-            rows, cols, weights = self._cuts_t
+            rows, cols, weights, links = self._cuts_t
             flat = phi.reshape(-1)
-            flux = torch.zeros_like(flat).index_add_(0, rows, weights * (flat[cols] - flat[rows]))
+            flux = links.add_to(torch.zeros_like(flat), weights * (flat[cols] - flat[rows]))
             residual = residual + self.diffusion * flux.reshape(phi.shape)
         return residual / a if normalised else residual
 
@@ -337,7 +390,7 @@ class DevicePixelEquation:
             cg.first_direction()
             while worst > target:
                 if iterations == maxiter:
-                    raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
+                    raise SolverDivergedError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                        f"(reached {worst:g})")
                 iterations += 1
                 worst = cg.iterate(target)
@@ -351,28 +404,40 @@ def gaussian_smoothing(image: torch.Tensor, sigma: float | None, truncate: float
     d c b a | a b c d), separably."""
     if not sigma:
         return image
-    radius = int(truncate * float(sigma) + 0.5)
-    x = np.arange(-radius, radius + 1)
-    kernel = np.exp(-0.5 * x**2 / float(sigma) ** 2)
-    kernel = torch.as_tensor(kernel / kernel.sum(), dtype=image.dtype, device=image.device)
 
     def along_last(t: torch.Tensor) -> torch.Tensor:
-        n = t.shape[-1]
-        index = np.arange(-radius, n + radius)
-        period = np.mod(index, 2 * n)
-        index = np.where(period < n, period, 2 * n - 1 - period)   # half-sample symmetric
-        padded = t[:, torch.as_tensor(index, device=t.device)]
-        return F.conv1d(padded[:, None], kernel.reshape(1, 1, -1))[:, 0]
+        kernel, index = _smoothing_tables(float(sigma), float(truncate), t.shape[-1], t.dtype, t.device)
+        return F.conv1d(t[:, index][:, None], kernel)[:, 0]
 
     return along_last(along_last(image).T).T
 
 
+@functools.lru_cache(maxsize=32)
+def _smoothing_tables(sigma: float, truncate: float, n: int, dtype, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """The smoothing's kernel (1, 1, 2 radius + 1) and its reflecting index for a line of ``n``
+    pixels, on ``device``: made and uploaded once per size, not per call."""
+    radius = int(truncate * sigma + 0.5)
+    x = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 * x**2 / sigma**2)
+    index = np.arange(-radius, n + radius)
+    period = np.mod(index, 2 * n)
+    index = np.where(period < n, period, 2 * n - 1 - period)   # half-sample symmetric
+    return (torch.as_tensor(kernel / kernel.sum(), dtype=dtype, device=device).reshape(1, 1, -1),
+            torch.as_tensor(index, device=device))
+
+
 def _bounding_box(mask: torch.Tensor, grow: int) -> Box | None:
-    rows, cols = torch.nonzero(mask.any(dim=1)).reshape(-1), torch.nonzero(mask.any(dim=0)).reshape(-1)
-    if rows.numel() == 0:
+    """The box of the True pixels grown by ``grow`` (None if there are none): found on the device
+    and brought to the host in one transfer (nonzero and five reads would sync six times)."""
+    rows, cols = mask.any(dim=1), mask.any(dim=0)
+
+    def first_last(v):
+        return torch.argmax(v.to(torch.uint8)), v.numel() - 1 - torch.argmax(torch.flip(v, (0,)).to(torch.uint8))
+
+    found, r0, r1, c0, c1 = torch.stack([rows.any().long(), *first_last(rows), *first_last(cols)]).tolist()
+    if not found:
         return None
-    box = (slice(int(rows[0]), int(rows[-1]) + 1), slice(int(cols[0]), int(cols[-1]) + 1))
-    return grow_box(box, grow, tuple(mask.shape))
+    return grow_box((slice(r0, r1 + 1), slice(c0, c1 + 1)), grow, tuple(mask.shape))
 
 
 class DeviceVerifiedInference:
@@ -471,8 +536,7 @@ class DeviceVerifiedInference:
         equation = self.equation
         residual = equation.residual(phi, history)
         failing = residual.abs() > self.tolerance
-        self.residual_before = float(residual.abs().max())
-        self.failing_fraction = float(failing.float().mean())
+        self.residual_before, self.failing_fraction = torch.stack([residual.abs().max(), failing.double().mean()]).tolist()
         self.t_check = time.perf_counter() - started
         started = time.perf_counter()
         corrected = torch.zeros(history.shape, dtype=torch.bool, device=self.device)
@@ -491,8 +555,7 @@ class DeviceVerifiedInference:
             residual = equation.residual(phi, history)
             failing = residual.abs() > self.tolerance
             margin *= 2
-        self.residual_after = float(residual.abs().max())
-        self.corrected_fraction = float(corrected.float().mean())
+        self.residual_after, self.corrected_fraction = torch.stack([residual.abs().max(), corrected.double().mean()]).tolist()
         out = phi.cpu().numpy()   # down once
         self.t_correction = time.perf_counter() - started
         self.phi = phi

@@ -85,6 +85,7 @@ import numpy as np
 import scipy.fft
 import scipy.ndimage
 
+from ifenn.errors import SolverDivergedError
 from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
 from ifenn.schema import schema_defaults
 
@@ -260,7 +261,7 @@ class PixelEquation:
                                                 worst.ctypes.data, counts.size, counts.ctypes.data, rows.ctypes.data, cols.ctypes.data,
                                                 weights.ctypes.data)
             if iterations < 0:
-                raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
+                raise SolverDivergedError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                    f"(reached {worst[0]:g})")
             phi[box] += delta
             return float(worst[0]), int(iterations)
@@ -277,7 +278,7 @@ class PixelEquation:
             rz = float(np.vdot(residual, z))
             while True:
                 if iterations == maxiter:
-                    raise RuntimeError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
+                    raise SolverDivergedError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
                                        f"(reached {worst:g})")
                 iterations += 1
                 a_dir = self._apply(direction, h, edges, links)

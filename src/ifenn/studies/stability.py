@@ -10,7 +10,9 @@ A cell is compared with a reference: FEM cells with FEM at the finest load step 
 panel) or on the finest mesh (lc/h panel), IFENN cells with FEM on the same scene and step.
 
 Labels, checked in this order (the first that applies):
-  diverged        the solver failed (an exception, a Krylov failure, a non-finite result)
+  diverged        the solver failed (ifenn.errors.SolverDivergedError: a Krylov failure, the pixel
+                  correction's iterations exhausted, a non-finite result); any other error stops
+                  the job with its message (a CUDA out-of-memory is not a physical result)
   no load drop    final force > final_force_max x the cell's own peak
   crack path wrong  IoU of the final crack set (phi >= 0.5) with the reference's < iou_min
   peak off        |peak force / reference peak - 1| > peak_error_max
@@ -26,6 +28,7 @@ import numpy as np
 
 from ifenn import run_files
 from ifenn.config import fem_run_spec, ifenn_run_spec
+from ifenn.errors import SolverDivergedError
 
 LABELS = ("ok", "peak off", "crack path wrong", "no load drop", "diverged")
 
@@ -200,7 +203,7 @@ def run_cell(spec: dict, out_dir: str | Path, fem_dir: str | Path | None = None,
                 status = {"status": "diverged", "error": f"its FEM cell failed: {fem_status.get('error', '')}"}
             else:
                 run_ifenn(spec, Path(fem_dir) / "mesh.xdmf", fem_dir, model, out_dir, progress=False, device=device)
-    except (RuntimeError, FloatingPointError, ValueError, ArithmeticError) as error:
+    except SolverDivergedError as error:   # the solver's own failure; any other error stops the job
         status = {"status": "diverged", "error": str(error)[:500]}
     status["wall_s"] = time.perf_counter() - started
     run_files.write_status(out_dir, status)
