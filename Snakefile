@@ -60,6 +60,7 @@ rule all:
         "results/figures/paper/mesh_study.png",
         "results/figures/paper/phase_field_time.png",
         expand("results/figures/specimens/{specimen}.png", specimen=config.get("specimens", {})),
+        expand("results/tables/specimens/{specimen}.csv", specimen=config.get("specimens", {})),
         ["results/tables/stability.csv", "results/figures/stability_map.png"] if config.get("stability") else [],
         ["results/tables/speed_accuracy.csv", "results/figures/speed_accuracy.png"] if config.get("speed_accuracy") else [],
         "results/benchmarks/phase_field_speed.csv" if config.get("phase_field_benchmark") else [],

@@ -334,3 +334,20 @@ def test_adaptive_finer_reference_is_nearer_the_next_uniform_mesh(adaptive_and_f
     table = adaptive_resolution_table(cases)
     assert (table.fine_uniform_dofs == uniform_dofs(spec["scene"])).all() and (table.fine_reference == "adaptive/snt1-II-fine-adaptive").all()
     adaptive_resolution_figure(adaptive_resolution_curves(cases), table, tmp_path_factory.mktemp("figure") / "resolution.png")
+
+
+def test_the_resolution_table_reports_u_at_the_peak_and_the_work_of_the_load():
+    """Against a finer curve: a run 1 % stronger throughout is 1 % off in peak and work and 0 in u
+    at the peak; a run whose curve comes 3 % later is 3 % off in u at the peak (beyond the 2 %
+    target) and, its drop later, does more work."""
+    from ifenn.studies.adaptive_resolution import resolution_rows
+
+    u = np.linspace(0.0, 2.0, 201)
+    fine = pd.DataFrame({"u": u, "reaction_force": np.minimum(u, 2.0 - u).clip(0)})
+    stronger = fine.assign(reaction_force=1.01 * fine.reaction_force)
+    later = pd.DataFrame({"u": 1.03 * u, "reaction_force": fine.reaction_force})
+    rows = {r["run"] or "fem": r for r in resolution_rows(stronger, fine, {"later": later}, 100, 100, {"fem": 10.0, "later": 2.5})}
+    assert rows["fem"]["peak_error_vs_fine_pct"] == pytest.approx(1.0) and rows["fem"]["work_error_vs_fine_pct"] == pytest.approx(1.0)
+    assert rows["fem"]["u_peak_error_vs_fine_pct"] == pytest.approx(0.0, abs=1e-9) and rows["fem"]["meets_u_peak"]
+    assert rows["later"]["u_peak_error_vs_fine_pct"] == pytest.approx(3.0) and not rows["later"]["meets_u_peak"]
+    assert rows["later"]["work_error_vs_fine_pct"] > 0 and rows["later"]["wall_fraction_of_fem_h"] == 0.25

@@ -71,3 +71,23 @@ def test_the_half_beam_doubled_is_the_whole_beam(beams):
     carrying = (whole.reaction_force >= 0.1 * peak).to_numpy()
     difference = np.abs(2 * half.reaction_force.to_numpy() - whole.reaction_force.to_numpy())[carrying]
     assert difference.max() < 0.005 * peak, pd.DataFrame({"whole": whole.reaction_force, "2 x half": 2 * half.reaction_force})
+
+
+def test_the_specimen_table_against_a_published_curve(beams, paper_config):
+    """The table of a specimen: the work of the load is the area under a curve (exact for a
+    triangle), the half's force doubled by its scene's symmetry_factor, ratios against the curve."""
+    from ifenn.studies.metrics import work_of_load
+    from ifenn.studies.specimens import specimen_table, symmetry_factor
+
+    u = np.linspace(0.0, 2.0, 21)
+    triangle = np.minimum(u, 2.0 - u)  # peak 1 at u = 1, area 1
+    assert abs(work_of_load(u, triangle, 2.0) - 1.0) < 1e-12 and abs(work_of_load(u, triangle, 0.5) - 0.125) < 1e-12
+    published = pd.read_csv(paper_config["specimens"]["three-point-bending"]["measured"]["file"], comment="#")
+    assert list(published.columns) == ["displacement_mm", "load_N"] and abs(published.load_N.max() - 34.75) < 1e-9
+    (spec_whole, _, whole), (spec_half, _, half) = beams
+    assert symmetry_factor(spec_whole["scene"]) == 1 and symmetry_factor(spec_half["scene"]) == 2
+    doubled = half.assign(reaction_force=symmetry_factor(spec_half["scene"]) * half.reaction_force)
+    table = specimen_table({"whole": whole, "half": doubled}, published).set_index("run")
+    assert table.loc["measured", ["peak_ratio", "u_peak_ratio", "work_ratio"]].tolist() == [1.0, 1.0, 1.0]
+    assert abs(table.loc["half", "peak_force"] / table.loc["whole", "peak_force"] - 1) < 0.005
+    assert abs(table.loc["whole", "peak_ratio"] - whole.reaction_force.max() / 34.75) < 1e-12

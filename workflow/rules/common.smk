@@ -308,3 +308,13 @@ SUMMARY_TABLES = {
     ]
     if produced
 }
+
+
+def specimen_factors(specimen):
+    """Per run of a specimen (its fem, ifenn and adaptive runs, in that order): how many copies of
+    its scene make the specimen (a half behind a mirror plane: 2)."""
+    entry = config["specimens"][specimen]
+    fem = list(entry["fem_runs"])
+    fem += [config["ifenn_runs"][run]["fem_run"] for run in entry.get("ifenn_runs", [])]
+    fem += [config["adaptive_runs"][run]["fem_run"] for run in entry.get("adaptive_runs", [])]
+    return [int(config["scenes"][config["fem_runs"][run]["scene"]].get("symmetry_factor", 1)) for run in fem]

@@ -72,7 +72,8 @@ rule phase_field_time_figure:
 
 
 rule specimen_figure:
-    """A specimen of the field against its measured curve (config specimens)."""
+    """A specimen of the field against its measured or published curve (config specimens): the
+    figure, and the table of each run's peak, u at the peak and work of the load against the curve's."""
     input:
         histories=lambda w: [f"results/fem/{run}/history.csv" for run in config["specimens"][w.specimen]["fem_runs"]],
         ifenn=lambda w: [f"results/ifenn/{run}/history.csv" for run in config["specimens"][w.specimen].get("ifenn_runs", [])],
@@ -80,12 +81,14 @@ rule specimen_figure:
         fields=lambda w: f"results/fem/{config['specimens'][w.specimen]['fem_runs'][0]}/fields.h5",
         measured=lambda w: os.path.join(workflow.basedir, config["specimens"][w.specimen]["measured"]["file"]),
     output:
-        report("results/figures/specimens/{specimen}.png", caption="../report/specimen.rst", category="The field's specimens"),
+        figure=report("results/figures/specimens/{specimen}.png", caption="../report/specimen.rst", category="The field's specimens"),
+        table="results/tables/specimens/{specimen}.csv",
     params:
         runs=lambda w: config["specimens"][w.specimen]["fem_runs"],
         ifenn_runs=lambda w: config["specimens"][w.specimen].get("ifenn_runs", []),
         adaptive_runs=lambda w: config["specimens"][w.specimen].get("adaptive_runs", []),
         label=lambda w: config["specimens"][w.specimen]["measured"]["label"],
+        factors=lambda w: specimen_factors(w.specimen),
         scene=lambda w: config["scenes"][config["fem_runs"][config["specimens"][w.specimen]["fem_runs"][0]]["scene"]],
     conda:
         "../envs/ifenn.yaml"

@@ -1,16 +1,26 @@
-"""Adapter: the specimen's FEM histories, the first run's phi and the measured curve -> ifenn.studies.plots.specimen_figure."""
+"""Adapter: the specimen's histories (forces of the whole specimen), the first run's phi and the
+measured or published curve -> ifenn.studies.plots.specimen_figure and ifenn.studies.specimens.specimen_table."""
 import pandas as pd
 
-from ifenn.io import log_to
+from ifenn.io import atomic_path, log_to
 from ifenn.run_files import read_phase_field_maps
 from ifenn.studies.plots import specimen_figure
+from ifenn.studies.specimens import specimen_table
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])
-curves = {f"FEM {run}": pd.read_csv(path) for run, path in zip(snakemake.params.runs, snakemake.input.histories, strict=True)}
-curves.update({f"IFENN {run}": pd.read_csv(path) for run, path in zip(snakemake.params.ifenn_runs, snakemake.input.ifenn, strict=True)})
-curves.update({f"adaptive {run}": pd.read_csv(path)
-               for run, path in zip(snakemake.params.adaptive_runs, snakemake.input.adaptive, strict=True)})
-maps, attrs = read_phase_field_maps(snakemake.input.fields)
-specimen_figure(curves, pd.read_csv(snakemake.input.measured, comment="#"), snakemake.params.label, maps, attrs,
-                snakemake.params.scene, snakemake.output[0], title=snakemake.wildcards.specimen)
+params, inputs = snakemake.params, snakemake.input
+labelled = ([(f"FEM {run}", path) for run, path in zip(params.runs, inputs.histories, strict=True)]
+            + [(f"IFENN {run}", path) for run, path in zip(params.ifenn_runs, inputs.ifenn, strict=True)]
+            + [(f"adaptive {run}", path) for run, path in zip(params.adaptive_runs, inputs.adaptive, strict=True)])
+curves = {}
+for (label, path), factor in zip(labelled, params.factors, strict=True):
+    frame = pd.read_csv(path)
+    frame["reaction_force"] *= factor
+    curves[label if factor == 1 else f"{label} (x{factor})"] = frame
+measured = pd.read_csv(inputs.measured, comment="#")
+maps, attrs = read_phase_field_maps(inputs.fields)
+specimen_figure(curves, measured, params.label, maps, attrs, params.scene, snakemake.output.figure,
+                title=snakemake.wildcards.specimen)
+with atomic_path(snakemake.output.table) as tmp:
+    specimen_table(curves, measured).to_csv(tmp, index=False, float_format="%.9g")

@@ -43,6 +43,23 @@ def force_curve_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+def peak(u: np.ndarray, force: np.ndarray) -> tuple[float, float]:
+    """(largest force, the displacement where it is first reached)."""
+    k = int(np.argmax(force))
+    return float(force[k]), float(u[k])
+
+
+def work_of_load(u: np.ndarray, force: np.ndarray, u_end: float) -> float:
+    """Area under the force over the displacement from the first point to ``u_end`` (trapezoids,
+    the curve interpolated linearly at ``u_end``): once the specimen is cut, the energy its
+    fracture dissipated. It compares two answers without depending on where the drop falls."""
+    u, force = np.asarray(u, dtype=float), np.asarray(force, dtype=float)
+    inside = u < u_end
+    uu = np.append(u[inside], u_end)
+    ff = np.append(force[inside], np.interp(u_end, u, force))
+    return float(np.sum(0.5 * (ff[1:] + ff[:-1]) * np.diff(uu)))
+
+
 def fine_label(where: dict) -> str:
     """A case's finer reference in a legend: the uniform FEM run, or its adaptive-mesh run
     (config ``finer_references``), from the reference's directory."""
