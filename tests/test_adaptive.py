@@ -182,24 +182,30 @@ def test_fine_region_holds_the_crack_and_history_never_decreases(adaptive_and_fi
     assert remeshed, "the test must see a remesh"
 
 
-def test_killed_adaptive_run_resumes_to_the_same_history(adaptive_and_fine, tmp_path, monkeypatch):
+def _killed_and_resumed(spec: dict, folder, monkeypatch, at: int) -> pd.DataFrame:
+    """Run ``spec`` into ``folder``, killed when increment ``at`` starts (its checkpoint left
+    behind), then again to the end: the resumed run's rows."""
     from ifenn.adaptive.run import AdaptiveRun, run_adaptive
 
-    spec, _, adaptive, _ = adaptive_and_fine
-    spec = {**spec, "load": spec["load"][:14], "save_fields": [7, 14]}
     original = AdaptiveRun.solve_increment
 
-    def killed(self, increment, u):
-        if increment == 12:
+    def killed(self, increment, *args):
+        if increment == at:
             raise KeyboardInterrupt("killed")
-        return original(self, increment, u)
+        return original(self, increment, *args)
 
     monkeypatch.setattr(AdaptiveRun, "solve_increment", killed)
     with pytest.raises(KeyboardInterrupt):
-        run_adaptive(spec, tmp_path / "run", progress=False)
-    assert (tmp_path / "run" / run_files.WORK / "checkpoint.npz").exists()
+        run_adaptive(spec, folder, progress=False)
+    assert (folder / run_files.WORK / "checkpoint.npz").exists()
     monkeypatch.setattr(AdaptiveRun, "solve_increment", original)
-    resumed = pd.DataFrame(run_adaptive(spec, tmp_path / "run", progress=False))
+    return pd.DataFrame(run_adaptive(spec, folder, progress=False))
+
+
+def test_killed_adaptive_run_resumes_to_the_same_history(adaptive_and_fine, tmp_path, monkeypatch):
+    spec, _, adaptive, _ = adaptive_and_fine
+    spec = {**spec, "load": spec["load"][:14], "save_fields": [7, 14]}
+    resumed = _killed_and_resumed(spec, tmp_path / "run", monkeypatch, at=12)
     np.testing.assert_allclose(resumed.reaction_force, adaptive.reaction_force[:14], rtol=1e-6)
     np.testing.assert_array_equal(resumed.dofs, adaptive.dofs[:14])
 
@@ -229,6 +235,39 @@ def test_adaptive_run_that_repeats_another_runs_first_increments_starts_from_its
     record = run_files.read_provenance(tmp_path / "shared")
     assert record["start_from"] == shared["start_from"]
     assert record["start_wall_s"] == pytest.approx(adaptive_and_fine[2].t_increment_s[:8].sum())
+
+
+def test_adaptive_steps_and_converged_staggering_on_the_adaptive_mesh(quick_config, tmp_path, tmp_path_factory, monkeypatch):
+    """The combined run: the load step controller of FEM (schedule A) on the mesh that follows the
+    crack, with staggering to convergence. Attempts that move phi by more than phi_change_max (where
+    phi >= phi_floor) are undone and redone at a smaller step; every accepted increment stays within
+    it (or was made at the smallest step); the run ends at u_end; its peak is the uniform FEM's with the same schedule
+    and staggering to its mesh's error (quick: measured below 1 %); killed, it resumes to the same rows."""
+    from conftest import quick_fem_run
+
+    from ifenn.adaptive.run import run_adaptive
+    from ifenn.config import fem_run_spec
+    from ifenn.fem.loading import largest_change
+
+    spec = {**fem_run_spec(quick_config, "snt1-A-conv"), "name": "snt1-A-conv-adaptive", "adaptive_mesh": {"levels": 3},
+            "checkpoint_every": 4, "save_every": 1}
+    controller = spec["adaptive"]
+    history = pd.DataFrame(run_adaptive(spec, tmp_path / "run", progress=False))
+    assert history.u.iloc[-1] == pytest.approx(controller["u_end"]) and history.rejected_steps.sum() > 0
+    assert (history.stagger_iterations > 1).any() and history.phi_max.iloc[-1] > 0.99
+    states = run_files.read_states(tmp_path / "run" / run_files.FIELDS, keys=("phase_field_gp",))
+    steps = np.diff(np.concatenate([[0.0], history.u.to_numpy()]))
+    by_increment = {s["increment"]: s["phase_field_gp"] for s in states}
+    for k in sorted(by_increment)[1:]:
+        if k - 1 in by_increment and steps[k - 1] > controller["step_min"] * (1 + 1e-9):
+            change = largest_change(by_increment[k], by_increment[k - 1], controller.get("phi_floor", 0.0))
+            assert change <= controller["phi_change_max"] * (1 + 1e-9), k
+    *_, uniform = quick_fem_run(quick_config, tmp_path_factory, "snt1-A-conv", "uniform")
+    assert abs(history.reaction_force.max() / uniform.reaction_force.max() - 1) < 0.01
+
+    resumed = _killed_and_resumed(spec, tmp_path / "again", monkeypatch, at=10)
+    np.testing.assert_allclose(resumed.u, history.u, rtol=1e-6)   # the steps follow phi, to round-off
+    np.testing.assert_allclose(resumed.reaction_force, history.reaction_force, rtol=1e-6)
 
 
 def test_paper_adaptive_runs_share_the_schedule_prefix(paper_config):

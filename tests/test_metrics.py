@@ -103,3 +103,17 @@ def test_post_peak_rms_counts_only_after_the_reference_peak():
     assert abs(post_peak_rms(u, force, u_ref, f_ref) - 0.02) < 1e-12
     assert abs(post_peak_rms(u, -force, u_ref, f_ref) - 0.02) < 1e-12    # |F|: the sign of a reaction is a convention
     assert np.isnan(post_peak_rms(u[u < 0.3], force[u < 0.3], u_ref, f_ref))
+
+
+def test_half_drop_and_work_of_the_load_on_a_known_curve():
+    """A triangle rising to 1 at u = 1 and falling to 0 at u = 2: the force is half the peak again
+    at u = 1.5, the work to the end is 1; a curve whose drop comes later has a later half drop and
+    more work, one cut short at its peak has none (NaN)."""
+    from ifenn.studies.metrics import u_at_half_drop, work_of_load
+
+    u = np.linspace(0.0, 2.0, 41)
+    force = np.minimum(u, 2.0 - u)
+    assert u_at_half_drop(u, force) == pytest.approx(1.5) and work_of_load(u, force, 2.0) == pytest.approx(1.0)
+    later = np.minimum(u, 1.2 * (2.0 - u)).clip(0)
+    assert u_at_half_drop(u, later) > 1.5 and work_of_load(u, later, 2.0) > 1.0
+    assert np.isnan(u_at_half_drop(u[:21], force[:21]))

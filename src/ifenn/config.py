@@ -492,7 +492,7 @@ def _runs_of_fem_run(key: str, names: list, pool: dict, kind: str, verb: str, fe
 
 
 def _adaptive_problems(config: dict, schema: dict) -> list[str]:
-    """Adaptive runs: a FEM run with a fixed schedule, settings in range once merged, a
+    """Adaptive runs: a FEM run (fixed or adaptive load steps), settings in range once merged, a
     trigger inside the buffer; adaptive_resolution cases name existing runs of their FEM run."""
     problems = []
     fem_runs, adaptive_runs = config.get("fem_runs", {}), config.get("adaptive_runs", {})
@@ -502,9 +502,6 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
         key = f"adaptive_runs.{name}"
         if entry["fem_run"] not in fem_runs:
             problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' is not a FEM run; allowed: {sorted(fem_runs)}")
-        elif (schedule := config["schedules"].get(fem_runs[entry["fem_run"]]["schedule"])) is not None and schedule_increments(schedule) is None:
-            problems.append(f"config key '{key}.fem_run': '{entry['fem_run']}' has an adaptive load schedule; adaptive meshes "
-                            "run fixed schedules")
         ifenn_run = entry.get("ifenn_run")
         if ifenn_run is not None:
             ifenn_runs = config.get("ifenn_runs", {})

@@ -74,8 +74,9 @@ from ifenn import geometry, run_files
 from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
 from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
+from ifenn.errors import NonFiniteResultError
 from ifenn.fem import supports
-from ifenn.fem.loading import load_control
+from ifenn.fem.loading import largest_change, load_control
 from ifenn.io import progress_bar, provenance
 from ifenn.pixels import PixelGrid, SlitCuts
 
@@ -83,10 +84,10 @@ log = logging.getLogger(__name__)
 
 COLUMNS = ["increment", "u", "reaction_force", "phi_max", "stagger_iterations", "t_displacement_s", "t_phase_field_s",
            "t_history_s", "t_remesh_s", "t_increment_s", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations",
-           "t_network_s", "verify_residual_after", "displacement_iterations"]
+           "t_network_s", "verify_residual_after", "displacement_iterations", "rejected_steps", "rejected_iterations"]
 #: integer columns (a checkpoint stores the rows as floats)
 INTEGER_COLUMNS = ("increment", "stagger_iterations", "dofs", "cells", "remeshes", "outside_fine", "phase_field_iterations",
-                   "displacement_iterations")
+                   "displacement_iterations", "rejected_steps", "rejected_iterations")
 
 
 @dataclass(frozen=True)
@@ -197,9 +198,7 @@ class AdaptiveRun:
         self.removed = ~geometry.solid_pixels(self.scene, fine_grid) if self.scene.get("cutouts") else None
         Gc, lc = self.material["Gc"], self.material["lc"]
         self.equation = PixelEquation(Gc, lc, self.grid.h_px, "replicate", SlitCuts.for_scene(self.scene, self.grid))
-        self.loads = load_control(spec)
-        if self.loads.adaptive:
-            raise ValueError("adaptive meshes run fixed load schedules only (an adaptive step controller is not wired in)")
+        self.loads = load_control(spec)   # fixed, or adaptive steps (ifenn.fem.loading.AdaptiveLoads, as FEM's)
         self.progress, self.hash = progress, spec_hash(spec)
         self.start_dir = start_dir
         if spec.get("start_from") is not None and start_dir is None:
@@ -267,7 +266,7 @@ class AdaptiveRun:
     def _checkpoint(self, increment: int) -> None:
         rows = np.array([[row[c] for c in COLUMNS] for row in self.rows], dtype=float)
         run_files.write_state(self.work_dir / "checkpoint.npz", {"history": self.history, "phase_field": self.phi, "region": self.region,
-                                                                 "mesh_region": self.mesh_region,
+                                                                 "mesh_region": self.mesh_region, **self.loads.state(),
                                                                  "rows": rows, "increment": increment, "spec_hash": self.hash})
 
     def _start(self) -> int:
@@ -290,12 +289,13 @@ class AdaptiveRun:
         if not path.exists():
             return self._start()
         data = run_files.read_state(path)
-        if str(data["spec_hash"]) != self.hash:
-            log.warning("ignoring checkpoint of another configuration (%s)", path)
+        if str(data["spec_hash"]) != self.hash or data["rows"].shape[-1] != len(COLUMNS):
+            log.warning("ignoring checkpoint of another configuration or version (%s)", path)
             return self._start()
         self.history, self.phi = data["history"], data["phase_field"]
         self.region, self.mesh_region = data["region"].astype(bool), data["mesh_region"].astype(bool)
         self.rows = _typed([dict(zip(COLUMNS, row, strict=True)) for row in data["rows"].tolist()])
+        self.loads.restore({k: data[k] for k in self.loads.state() if k in data}, self.rows)
         log.info("resuming %s after increment %d", self.spec["name"], int(data["increment"]))
         return int(data["increment"])
 
@@ -313,48 +313,78 @@ class AdaptiveRun:
         first = self._resume() + 1
         self.build_mesh(self.mesh_region)
         save = set(self.spec["save_fields"])
-        bar = progress_bar(total=self.loads.increments, initial=first - 1, desc=self.spec["name"], unit="inc",
-                           dynamic_ncols=True) if self.progress else None
+        every = self.spec.get("save_every")   # adaptive steps: fields every save_every increments
+        u_previous = self.rows[-1]["u"] if self.rows else 0.0
+        bar = None
+        if self.progress and self.loads.increments:
+            bar = progress_bar(total=self.loads.increments, initial=first - 1, desc=self.spec["name"], unit="inc", dynamic_ncols=True)
+        elif self.progress:   # adaptive steps: progress in micrometres of prescribed displacement
+            bar = progress_bar(total=round(self.loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=self.spec["name"],
+                               unit="um", miniters=1e-12, dynamic_ncols=True,
+                               bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
         increment = first
-        while (u := self.loads.next_load(increment, 0.0)) is not None:
+        while (u := self.loads.next_load(increment, u_previous)) is not None:
             try:
-                row = self.solve_increment(increment, u)
+                row = self.solve_increment(increment, u, u_previous)
             except Exception as error:
                 if bar is not None:
                     bar.close()
                 raise type(error)(f"run {self.spec['name']}, increment {increment} (u = {u:g} mm): {error}") from error
             self.rows.append(row)
+            u = row["u"]   # adaptive steps may have cut it
             last = self.loads.is_last(increment, u)
-            if increment in save or last:
+            if increment in save or (every and increment % every == 0) or last:
                 self._snapshot(increment, u)
             if increment % self.spec["checkpoint_every"] == 0 or last:
                 self._checkpoint(increment)
             if bar is not None:
                 bar.set_postfix(F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", dofs=row["dofs"], refresh=False)
-                bar.update(1)
-            increment += 1
+                bar.update(1 if self.loads.increments else round((u - u_previous) * 1e3, 6))
+            u_previous, increment = u, increment + 1
         if bar is not None:
             bar.close()
         self._finish(time.perf_counter() - started)
         return self.rows
 
-    def solve_increment(self, increment: int, u: float) -> dict:
+    def solve_increment(self, increment: int, u: float, u_previous: float = 0.0) -> dict:
         """One increment at prescribed displacement ``u``, redone on a new mesh while the crack
-        leaves the fine region (module doc). Returns its history row."""
-        settings, spec = self.settings, self.spec
+        leaves the fine region (module doc); with adaptive steps, an attempt the controller refuses
+        (phi moved too far, or the staggering did not converge) is undone and redone at its smaller
+        step, as FEM's (:class:`ifenn.fem.loading.AdaptiveLoads`; every attempt's time counts).
+        Returns its history row."""
+        loads = self.loads
+        loads.begin_increment()
         times = dict.fromkeys(("t_displacement_s", "t_phase_field_s", "t_history_s", "t_remesh_s"), 0.0)
+        counts = {"remeshes": 0, "phase_field_iterations": 0, "displacement_iterations": 0, "t_network_s": 0.0}
         started = time.perf_counter()
-        remeshes = pf_iterations = u_iterations = 0
-        network_s = 0.0
+        rejected_iterations = 0
+        while True:
+            row, history, phi, converged, region = self._attempt(u, times, counts)
+            if not loads.adaptive or loads.judge(largest_change(phi, self.phi, loads.phi_floor), converged):
+                break
+            rejected_iterations += row["stagger_iterations"]
+            u = loads.next_load(increment, u_previous)   # the state is still the last accepted one: redo
+        self.history, self.phi, self.region = history, phi, region
+        return {"increment": increment, "u": u, **row, **times, "t_increment_s": time.perf_counter() - started, **counts,
+                "rejected_steps": loads.rejected if loads.adaptive else 0, "rejected_iterations": rejected_iterations}
+
+    def _attempt(self, u: float, times: dict, counts: dict):
+        """Staggered iterations at ``u`` from the last accepted state, the mesh rebuilt while the
+        crack leaves its fine cells. Returns (the row's values, H, phi, converged, the next fine
+        region); ``times`` and ``counts`` accumulate. The accepted state (``self.phi``,
+        ``self.history``, ``self.region``) is not touched."""
+        settings, spec = self.settings, self.spec
+        remeshes = 0
         pending = self.region          # what this increment's rebuilds ask for (module doc)
         while True:
             problem = self.problem
             problem.set_phase_field(self.phi)
             phi = self.phi.copy()
+            converged = spec["stagger_max_iterations"] == 1   # the single pass: converged by definition
             for iteration in range(1, spec["stagger_max_iterations"] + 1):
                 staggered = iteration
                 t = time.perf_counter()
-                u_iterations += problem.solve_displacement(u)
+                counts["displacement_iterations"] += problem.solve_displacement(u)
                 times["t_displacement_s"] += time.perf_counter() - t
                 t = time.perf_counter()
                 energy = problem.tensile_energy()
@@ -363,11 +393,12 @@ class AdaptiveRun:
                 t = time.perf_counter()
                 before = phi.copy()
                 phi, iterations, t_network, residual_after = self._phase_field(phi, history)
-                pf_iterations += iterations
-                network_s += t_network
+                counts["phase_field_iterations"] += iterations
+                counts["t_network_s"] += t_network
                 problem.set_phase_field(phi)
                 times["t_phase_field_s"] += time.perf_counter() - t
                 if np.abs(phi - before).max() < spec["stagger_tolerance"]:
+                    converged = True
                     break
             core = crack_core(phi, energy, self.material, settings)
             outside = not self.inside_fine(grown(core, settings.trigger_lc, self.material, self.grid.h_px))
@@ -378,15 +409,13 @@ class AdaptiveRun:
             self.build_mesh(pending)
             times["t_remesh_s"] += time.perf_counter() - t
             remeshes += 1
-        self.history, self.phi = history, phi
-        self.region = grown(core, settings.buffer_lc, self.material, self.grid.h_px)
+            counts["remeshes"] += 1
         force = problem.reaction_force()
         if not np.isfinite(force):
-            raise FloatingPointError(f"non-finite reaction force {force}")
-        return {"increment": increment, "u": u, "reaction_force": force, "phi_max": float(phi.max()), "stagger_iterations": staggered,
-                **times, "t_increment_s": time.perf_counter() - started, "dofs": problem.n_dofs, "cells": problem.tree.n_cells,
-                "remeshes": remeshes, "outside_fine": int(outside), "phase_field_iterations": pf_iterations,
-                "t_network_s": network_s, "verify_residual_after": residual_after, "displacement_iterations": u_iterations}
+            raise NonFiniteResultError(f"non-finite reaction force {force}")
+        row = {"reaction_force": force, "phi_max": float(phi.max()), "stagger_iterations": staggered, "dofs": problem.n_dofs,
+               "cells": problem.tree.n_cells, "outside_fine": int(outside), "verify_residual_after": residual_after}
+        return row, history, phi, converged, grown(core, settings.buffer_lc, self.material, self.grid.h_px)
 
     # ------------------------------------------------------------------ outputs
     def _finish(self, wall_s: float) -> None:

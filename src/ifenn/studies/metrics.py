@@ -60,6 +60,19 @@ def work_of_load(u: np.ndarray, force: np.ndarray, u_end: float) -> float:
     return float(np.sum(0.5 * (ff[1:] + ff[:-1]) * np.diff(uu)))
 
 
+def u_at_half_drop(u: np.ndarray, force: np.ndarray) -> float:
+    """The displacement where the force, after its peak, first falls to half the peak
+    (interpolated linearly between increments); NaN if it never does."""
+    u, force = np.asarray(u, dtype=float), np.asarray(force, dtype=float)
+    k = int(np.argmax(force))
+    half = 0.5 * force[k]
+    below = np.nonzero(force[k:] <= half)[0]
+    if len(below) == 0:
+        return float("nan")
+    j = k + int(below[0])
+    return float(np.interp(half, [force[j], force[j - 1]], [u[j], u[j - 1]]))
+
+
 def fine_label(where: dict) -> str:
     """A case's finer reference in a legend: the uniform FEM run, or its adaptive-mesh run
     (config ``finer_references``), from the reference's directory."""

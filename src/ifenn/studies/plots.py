@@ -402,35 +402,51 @@ def stability_map_figure(table, path) -> None:
 
 def speed_accuracy_figure(table, path, benchmark=None) -> None:
     """Per scene (rows): force-curve error against wall time of the whole run (left) and of
-    the propagation stage (right), log-log, FEM circles, IFENN squares (whole-path IFENN
-    diamonds), adaptive-mesh runs triangles, the Pareto front
-    of each panel as a line; the reference run is drawn at the bottom edge. ``benchmark``
-    (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
+    the propagation stage (middle), log-log, one marker per method family (FEM circles, IFENN
+    squares, whole-path IFENN diamonds, adaptive-mesh runs triangles; hollow: converged
+    staggering; colour: the load schedule), the Pareto front of each panel as a line. Only the
+    front and the reference (drawn at the bottom edge) are labelled by name; every other point
+    carries a number, and the table on the right lists them all with their wall time, error and
+    work of the load. ``benchmark`` (optional, the phase_field_speed table) puts its same-core
+    speed-ups in the title."""
+    import textwrap
+
     scenes = list(dict.fromkeys(table.scene))
-    fig, axes = plt.subplots(len(scenes), 2, figsize=(13, 5.2 * len(scenes)), squeeze=False)
+    fig, axes = plt.subplots(len(scenes), 3, figsize=(19, 6.6 * len(scenes)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 0.95]})
     schedules = list(dict.fromkeys(table.schedule))
     colours = dict(zip(schedules, plt.cm.tab10(np.arange(len(schedules)) % 10), strict=True))
     for row_axes, scene in zip(axes, scenes, strict=True):
-        rows = table[table.scene == scene]
+        rows = table[table.scene == scene].reset_index(drop=True)
         floor = 0.5 * rows.force_l2_rel_error[~rows.is_reference].min()
         for ax, column, title in ((row_axes[0], "wall_s", "whole run"), (row_axes[1], "propagation_wall_s", "propagation stage")):
-            for _, r in rows.iterrows():
+            for k, r in rows.iterrows():
                 error = floor if r.is_reference else r.force_l2_rel_error
                 colour = colours[r.schedule]
                 marker = {"fem": "o", "adaptive": "^"}.get(r.method, "D" if r.variant.endswith("whole path") else "s")
                 ax.scatter(r[column], 100 * error, marker=marker, s=60,
                            facecolor="white" if r.converged else colour,
                            edgecolor="k" if r[f"pareto_{column}"] else colour, linewidth=1.8, zorder=3)
-                ax.annotate(r.run + (" (reference)" if r.is_reference else ""), (r[column], 100 * error), fontsize=6,
-                            xytext=(4, 3), textcoords="offset points")
+                named = r.is_reference or r[f"pareto_{column}"]
+                ax.annotate(r.run + (" (reference)" if r.is_reference else "") if named else str(k + 1), (r[column], 100 * error),
+                            fontsize=7 if named else 6, xytext=(4, 3), textcoords="offset points",
+                            fontweight="bold" if named else "normal")
             front = rows[rows[f"pareto_{column}"]].sort_values(column)
             ax.step(front[column], 100 * front.force_l2_rel_error, where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel(f"wall time, {title} (s, sum of increments)")
-            ax.set_ylabel(f"force-curve L2 error vs {rows.reference.iloc[0]} (%, converged reference)")
-            ax.set_title(f"{scene}: {title}")
+            ax.set_ylabel("force-curve L2 error (%) vs the converged reference")
+            ax.set_title("\n".join(textwrap.wrap(f"{scene}, {title}. Pareto front (no run both faster and more accurate): "
+                                                 + ", ".join(front.run), 70)), fontsize=8)
             ax.grid(True, which="both", alpha=0.3)
+        lines = [f"{'':>3} {'run':<34} {'wall s':>7} {'L2 %':>6} {'work %':>7}"]
+        for k, r in rows.iterrows():
+            work = f"{100 * r.work_rel_error:+.1f}" if "work_rel_error" in r and np.isfinite(r.work_rel_error) else "-"
+            lines.append(f"{k + 1:>3} {r.run[:34]:<34} {r.wall_s:>7.3g} {100 * r.force_l2_rel_error:>6.2g} {work:>7}")
+        row_axes[2].axis("off")
+        row_axes[2].text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=6, va="top", transform=row_axes[2].transAxes)
+        row_axes[2].set_title(f"{scene}: every point (reference {rows.reference.iloc[0]})", fontsize=8)
         handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
                    plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
                    plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path (from the first increment)"),
@@ -438,7 +454,8 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
                    plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
                    plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
         handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
-        row_axes[1].legend(handles=handles, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        if scene == scenes[0]:   # once, under the title (on a chart it would cover points)
+            fig.legend(handles=handles, fontsize=7, loc="upper center", ncol=7, bbox_to_anchor=(0.5, 0.985 - 0.004 * len(scenes)))
     title = "Speed against accuracy on a CPU, one thread per run (wall times under the load of the runs made alongside)."
     if benchmark is not None and len(benchmark):
         names = {"ifenn_full_convolution": "full image, convolutions (the paper)", "ifenn_full": "full image, orbit evaluation",

@@ -9,7 +9,11 @@ snt1: h/2, the 400 x 400 mesh's), so FEM at h is a point with its own discretisa
 other. The finer uniform FEM is a point too: single-pass staggering lags the converged load path
 after the peak, by more than the mesh at h errs (measured: docs/decisions.md). Errors: the
 relative L2(u) error of the force curve over the common u range (metrics.force_curve_error), the
-post-peak force RMS over the reference's peak (metrics.post_peak_rms) and the peak force's. Wall time: the sum of the per-increment times recorded in
+post-peak force RMS over the reference's peak (metrics.post_peak_rms) and the peak force's; and two
+that measure the answer without being dominated by where the drop falls: the work of the load up to
+the end of the shorter curve (``work_rel_error``; once the specimen is cut, the dissipated energy)
+and the displacement at which the force has fallen to half its peak (``u_half_drop`` and its
+``u_half_drop_rel_error``). Wall time: the sum of the per-increment times recorded in
 history.csv (an IFENN run's history holds the FEM increments it continued, so its whole-run
 time includes the FEM stage before the switch-over); propagation stage = the increments after
 the switch-over (the first increment with phi_max > switch_phi_max; for a whole-path IFENN run,
@@ -27,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_spec
-from ifenn.studies.metrics import force_curve_error, post_peak_rms
+from ifenn.studies.metrics import force_curve_error, post_peak_rms, u_at_half_drop, work_of_load
 
 
 def _label(method: str, spec: dict) -> str:
@@ -46,6 +50,13 @@ def _label(method: str, spec: dict) -> str:
     if spec.get("switch_over") == "start":
         what += ", whole path"
     return f"IFENN {spec['schedule_name']}, {stagger}, {what}"
+
+
+def _drop_and_work(u, force, ref_u, ref_force, ref_half: float) -> dict:
+    u_end = min(u[-1], ref_u[-1])
+    half = u_at_half_drop(u, force)
+    return {"work_rel_error": work_of_load(u, force, u_end) / work_of_load(ref_u, ref_force, u_end) - 1.0,
+            "u_half_drop": half, "u_half_drop_rel_error": half / ref_half - 1.0}
 
 
 def pareto_front(time: np.ndarray, error: np.ndarray) -> np.ndarray:
@@ -67,6 +78,8 @@ def speed_accuracy_table(setups: dict, run_dirs: dict[str, dict[str, str | Path]
     for scene, setup in setups.items():
         reference_method = setup.get("reference_method", "fem")
         ref = read_history(run_dirs[reference_method][setup["reference"]])
+        ref_u, ref_force = ref.u.to_numpy(), ref.reaction_force.to_numpy()
+        ref_half = u_at_half_drop(ref_u, ref_force)
         for method in ("fem", "ifenn", "adaptive"):
             for run in setup.get(method, []):
                 history, spec = read_history(run_dirs[method][run]), read_spec(run_dirs[method][run])
@@ -93,6 +106,7 @@ def speed_accuracy_table(setups: dict, run_dirs: dict[str, dict[str, str | Path]
                                                    ref.u.to_numpy(), ref.reaction_force.to_numpy()),
                     "peak_force": float(history.reaction_force.max()),
                     "peak_force_rel_error": float(history.reaction_force.max() / ref.reaction_force.max() - 1.0),
+                    **_drop_and_work(history.u.to_numpy(), history.reaction_force.to_numpy(), ref_u, ref_force, ref_half),
                     "reference": setup["reference"], "is_reference": method == reference_method and run == setup["reference"],
                 })
     table = pd.DataFrame(rows)
