@@ -163,3 +163,19 @@ def test_non_finite_numbers_are_refused_naming_the_key(paper_config, overlay, ke
     with pytest.raises(ConfigError) as info:
         validate_config(deep_merge(paper_config, yaml.safe_load(overlay)))
     assert f"config key '{key}'" in str(info.value) and "is not a finite number" in str(info.value), str(info.value)
+
+
+def test_an_adaptive_run_on_a_finer_scene_of_the_same_specimen(paper_config):
+    """The converged reference one level finer: an adaptive run may take its FEM run's schedule and
+    solvers to another scene that differs in its elements only (a finer pixel grid); a scene of
+    another specimen is refused, naming the key."""
+    from ifenn.config import adaptive_run_spec
+
+    spec = adaptive_run_spec(paper_config, "snt1-III-conv-finer-adaptive")
+    reference = adaptive_run_spec(paper_config, "snt1-III-conv-adaptive")
+    assert spec["scene_name"] == "snt1-fine" and spec["scene"]["elements"] == [2 * n for n in reference["scene"]["elements"]]
+    assert spec["load"] == reference["load"] and spec["stagger_max_iterations"] == reference["stagger_max_iterations"]
+    config = copy.deepcopy(paper_config)
+    config["adaptive_runs"]["snt1-III-conv-finer-adaptive"]["scene"] = "sdnt"
+    with pytest.raises(ConfigError, match=r"'adaptive_runs.snt1-III-conv-finer-adaptive.scene': 'sdnt' differs .* in \['notches'\]"):
+        validate_config(config, petsc_names=False)

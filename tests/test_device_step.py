@@ -127,6 +127,27 @@ def _spoiled_network():
     return net
 
 
+def test_the_device_step_serves_another_material_through_the_scaled_history():
+    """The network trained on one material serves another at the same lc / h_px fed H lc/Gc in its
+    own units (input_scale): the pixel equation's dimensionless form is the same, so the step on
+    material B's H = H_A Gc_B / Gc_A gives material A's phi, step after step, to round-off, with the
+    same CG iterations."""
+    h_px, tolerance, gc_b = 0.0025, 1e-3, 0.09
+    scale = GC / gc_b
+    net = _spoiled_network()
+    own = DeviceVerifiedInference(net, DevicePixelEquation(GC, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
+                                  history_cap=45.0)
+    other = DeviceVerifiedInference(net, DevicePixelEquation(gc_b, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
+                                    history_cap=45.0 / scale, input_scale=scale)
+    previous = None
+    for x_tip in np.linspace(-0.05, 0.04, 4):
+        history = synthetic_history(n_px=96, x_tip=x_tip)
+        previous = history = history if previous is None else np.maximum(history, previous)
+        phi_a, phi_b = own(history), other(history / scale)
+        assert np.max(np.abs(phi_a - phi_b)) < 1e-9 and own.solve_iterations == other.solve_iterations
+        assert other.residual_after <= tolerance and own.evaluated_fraction == other.evaluated_fraction
+
+
 @pytest.mark.parametrize(("warm_start", "as_on_a_gpu"), [("increment", False), ("network", False), ("previous", False),
                                                         ("increment", True)])
 def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_start, as_on_a_gpu):

@@ -513,6 +513,18 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
             elif not deep_merge(config["ifenn"]["verification"], ifenn_runs[ifenn_run].get("verification", {}))["enabled"]:
                 problems.append(f"config key '{key}.ifenn_run': '{ifenn_run}' is not verified; on an adaptive mesh the network's "
                                 "answer is always checked (an IFENN run with verification.enabled)")
+        if (scene := entry.get("scene")) is not None and entry["fem_run"] in fem_runs:
+            own = fem_runs[entry["fem_run"]]["scene"]
+            if scene not in config["scenes"]:
+                problems.append(f"config key '{key}.scene': '{scene}' is not a scene; allowed: {sorted(config['scenes'])}")
+            elif own in config["scenes"]:
+                a, b = config["scenes"][own], config["scenes"][scene]
+                different = [k for k in ("domain", "notches", "cutouts", "boundary", "plane", "thickness") if a.get(k) != b.get(k)]
+                if scene_material(config["material"], a) != scene_material(config["material"], b):
+                    different.append("material")
+                if different:
+                    problems.append(f"config key '{key}.scene': '{scene}' differs from '{own}' (the scene of '{entry['fem_run']}') "
+                                    f"in {different}; another scene of a run may differ in its elements only")
         merged = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
         for err in validator.iter_errors(merged):
             where = ".".join(map(str, err.absolute_path)) or ""
@@ -537,7 +549,8 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
 
 
 def adaptive_run_spec(config: dict, run: str) -> dict:
-    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers), the merged
+    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers; the scene replaced by
+    the entry's ``scene``, the same specimen on more elements, where it names one), the merged
     ``adaptive_mesh`` settings (:class:`ifenn.adaptive.run.MeshSettings`) and, for a verified
     IFENN run (``ifenn_run``), that run's hybrid settings."""
     if run not in config.get("adaptive_runs", {}):
@@ -548,6 +561,9 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
         hybrid = ifenn_run_spec(config, entry["ifenn_run"])
         spec.update({k: v for k, v in hybrid.items() if k not in spec and k not in ("switch_over", "switch_increment")},
                     ifenn_run=entry["ifenn_run"])
+    if entry.get("scene"):   # the same specimen on more elements: a finer pixel grid, so finer fine cells
+        scene = config["scenes"][entry["scene"]]
+        spec.update(scene_name=entry["scene"], scene=scene, material=scene_material(config["material"], scene))
     settings = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
     spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh=settings)
     if settings.get("linear_solvers"):   # the displacement solve's preset on the adaptive mesh

@@ -445,7 +445,9 @@ class DeviceVerifiedInference:
     with a history image (numpy, N/mm^2), returns the certified phi (numpy), with the same
     records (``corrected_fraction``, ``residual_before`` / ``residual_after``, ``solve_work``,
     ``t_check``, ``t_correction``, ``t_network``, ``evaluated_fraction``). ``model``: the PICNN
-    (on ``device``), or None with ``warm_start='previous'``."""
+    (on ``device``), or None with ``warm_start='previous'``. ``input_scale``: the network is fed
+    that times the (capped) H: a network trained on another material at the same lc / h_px
+    (:func:`ifenn.hybrid.runs.network_service`; ``history_cap`` is then the published cap over it)."""
 
     #: correction boxes over more than this share of the image: the whole image instead (as the
     #: CPU step); on a GPU every correction is on the whole image (``global_fraction`` 0: one
@@ -456,7 +458,8 @@ class DeviceVerifiedInference:
                  margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
                  solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"],
                  history_cap: float | None = None, cap_history: bool = _DEFAULTS["cap_history"],
-                 sigma: float | None = None, truncate: float = 4.0, network_tolerance: float | None = None):
+                 sigma: float | None = None, truncate: float = 4.0, network_tolerance: float | None = None,
+                 input_scale: float = 1.0):
         if warm_start not in WARM_STARTS:
             raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
         if warm_start != "previous" and model is None:
@@ -464,6 +467,7 @@ class DeviceVerifiedInference:
         if not tolerance > 0:
             raise ValueError(f"verification tolerance must be > 0, got {tolerance}")
         self.model, self.equation, self.tolerance = model, equation, float(tolerance)
+        self.input_scale = float(input_scale)
         self.device = equation.device
         self.margin = int(np.ceil(float(margin_lc) * equation.lc / equation.h_px))
         self.max_rounds, self.solve_fraction, self.warm_start = int(max_rounds), float(solve_fraction), warm_start
@@ -493,7 +497,7 @@ class DeviceVerifiedInference:
     def _network(self, capped: torch.Tensor) -> torch.Tensor:
         started = time.perf_counter()
         dtype = next(self.model.parameters()).dtype
-        raw = self.model.phase_field(capped.to(dtype)[None, None])[0, 0].to(torch.float64)
+        raw = self.model.phase_field((capped * self.input_scale).to(dtype)[None, None])[0, 0].to(torch.float64)
         out = gaussian_smoothing(raw, self.sigma, self.truncate)
         if self.device.type == "cuda":
             torch.cuda.synchronize(self.device)

@@ -151,9 +151,6 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
         Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
         settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"],
                     warm_start, spec["history_cap"] / scale, verification.get("cap_history", False))
-        if verified_step_backend(device) == "torch" and scale != 1.0:
-            raise ValueError("the device's verified step does not scale the network's input for another material yet: "
-                             "run this scene on the CPU (device: cpu)")
         if verified_step_backend(device) == "torch":   # the whole step on the device (ifenn.hybrid.device_step)
             from ifenn.device import resolve_device
             from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
@@ -163,7 +160,7 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             model = load_picnn(model_path, device)[0] if warm_start != "previous" else None
             equation = DevicePixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec), device)
             return DeviceVerifiedInference(model, equation, *settings, sigma=spec["smoothing_sigma"], truncate=spec["smoothing_truncate"],
-                                           network_tolerance=verification.get("network_tolerance"))
+                                           network_tolerance=verification.get("network_tolerance"), input_scale=scale)
         network = None
         if warm_start != "previous":
             # the network only warm-starts a certified correction: how often it is asked is its own setting
