@@ -179,3 +179,18 @@ def test_an_adaptive_run_on_a_finer_scene_of_the_same_specimen(paper_config):
     config["adaptive_runs"]["snt1-III-conv-finer-adaptive"]["scene"] = "sdnt"
     with pytest.raises(ConfigError, match=r"'adaptive_runs.snt1-III-conv-finer-adaptive.scene': 'sdnt' differs .* in \['notches'\]"):
         validate_config(config, petsc_names=False)
+
+
+def test_an_adaptive_run_may_take_its_own_schedule_and_staggering(paper_config):
+    """The combined run on a specimen needs no uniform FEM run of its schedule: the adaptive run sets
+    its own schedule and staggering; the verified step's settings come from the IFENN run, its loads
+    do not. An unknown schedule is refused, naming the key."""
+    from ifenn.config import adaptive_run_spec
+
+    spec = adaptive_run_spec(paper_config, "l-panel-A-conv-adaptive-verified")
+    assert spec["schedule_name"] == "l-panel-A" and "load" not in spec and spec["adaptive"]["u_end"] == 1.0
+    assert spec["stagger_max_iterations"] == 50 and spec["verification"]["enabled"] and spec["scene_name"] == "l-panel"
+    config = copy.deepcopy(paper_config)
+    config["adaptive_runs"]["l-panel-A-conv-adaptive"]["schedule"] = "l-panel-Z"
+    with pytest.raises(ConfigError, match=r"'adaptive_runs.l-panel-A-conv-adaptive.schedule': 'l-panel-Z' is not a schedule"):
+        validate_config(config, petsc_names=False)

@@ -513,6 +513,8 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
             elif not deep_merge(config["ifenn"]["verification"], ifenn_runs[ifenn_run].get("verification", {}))["enabled"]:
                 problems.append(f"config key '{key}.ifenn_run': '{ifenn_run}' is not verified; on an adaptive mesh the network's "
                                 "answer is always checked (an IFENN run with verification.enabled)")
+        if entry.get("schedule") is not None and entry["schedule"] not in config["schedules"]:
+            problems.append(f"config key '{key}.schedule': '{entry['schedule']}' is not a schedule; allowed: {sorted(config['schedules'])}")
         if (scene := entry.get("scene")) is not None and entry["fem_run"] in fem_runs:
             own = fem_runs[entry["fem_run"]]["scene"]
             if scene not in config["scenes"]:
@@ -548,22 +550,30 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
     return problems
 
 
+#: what an adaptive run may set for itself instead of taking it from its FEM run
+ADAPTIVE_RUN_OVERRIDES = ("scene", "schedule", "stagger_max_iterations")
+
+
 def adaptive_run_spec(config: dict, run: str) -> dict:
-    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers; the scene replaced by
-    the entry's ``scene``, the same specimen on more elements, where it names one), the merged
+    """An adaptive-mesh run: its FEM run's spec (scene, schedule, solvers; the entry may name its own
+    ``scene``, the same specimen on more elements, ``schedule`` and ``stagger_max_iterations``:
+    ADAPTIVE_RUN_OVERRIDES, so that a variant needs no FEM run of its own on the uniform mesh), the merged
     ``adaptive_mesh`` settings (:class:`ifenn.adaptive.run.MeshSettings`) and, for a verified
     IFENN run (``ifenn_run``), that run's hybrid settings."""
     if run not in config.get("adaptive_runs", {}):
         raise ConfigError(f"unknown adaptive run '{run}'; allowed: {sorted(config.get('adaptive_runs', {}))}")
     entry = config["adaptive_runs"][run]
-    spec = fem_run_spec(config, entry["fem_run"])
+    own = {k: entry[k] for k in ADAPTIVE_RUN_OVERRIDES if k in entry}
+    if own:   # the FEM run's spec with the entry's scene, schedule or staggering (fem_run_spec resolves them)
+        fem = {**config["fem_runs"][entry["fem_run"]], **own}
+        spec = fem_run_spec({**config, "fem_runs": {**config["fem_runs"], entry["fem_run"]: fem}}, entry["fem_run"])
+    else:
+        spec = fem_run_spec(config, entry["fem_run"])
     if entry.get("ifenn_run"):   # the verified IFENN step's settings (predictor, verification, ...)
         hybrid = ifenn_run_spec(config, entry["ifenn_run"])
-        spec.update({k: v for k, v in hybrid.items() if k not in spec and k not in ("switch_over", "switch_increment")},
+        fem_keys = fem_run_spec(config, config["ifenn_runs"][entry["ifenn_run"]]["fem_run"])   # not the IFENN run's loads
+        spec.update({k: v for k, v in hybrid.items() if k not in spec and k not in fem_keys and k not in ("switch_over", "switch_increment")},
                     ifenn_run=entry["ifenn_run"])
-    if entry.get("scene"):   # the same specimen on more elements: a finer pixel grid, so finer fine cells
-        scene = config["scenes"][entry["scene"]]
-        spec.update(scene_name=entry["scene"], scene=scene, material=scene_material(config["material"], scene))
     settings = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
     spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh=settings)
     if settings.get("linear_solvers"):   # the displacement solve's preset on the adaptive mesh
