@@ -6,6 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 from ifenn.config import REPO, ifenn_run_spec, load_config
@@ -50,3 +53,23 @@ def setup(args: argparse.Namespace, section: str) -> tuple[dict, list[dict]]:
     if args.specs:
         return config, [json.loads(Path(path).read_text()) for path in args.specs]
     return config, [ifenn_run_spec(config, run) for run in config[section]["runs"]]
+
+
+#: a solver run's environment: one thread per process; Open MPI allowed as root (containers)
+SOLVER_ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
+
+
+def run_fem_spec(spec: dict, mesh: Path, work: Path, ranks: int = 1):
+    """The workflow's FEM solver (`python -m ifenn fem`) on ``spec`` in a process of its own (under
+    ``mpirun`` for ranks > 1), its output in ``work / spec['name']``: the history (a DataFrame)."""
+    import pandas as pd
+
+    spec_path = work / f"{spec['name']}.json"
+    spec_path.write_text(json.dumps(spec))
+    out = work / spec["name"]
+    command = [sys.executable, "-m", "ifenn", "fem", "--spec", str(spec_path), "--mesh", str(mesh), "--out", str(out), "--no-progress"]
+    if ranks > 1:
+        command = ["mpirun", "-n", str(ranks), "--oversubscribe", *command]
+    subprocess.run(command, check=True, env=SOLVER_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return pd.read_csv(out / "history.csv")
+

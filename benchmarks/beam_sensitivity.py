@@ -22,21 +22,17 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
-import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pandas as pd
+from _cli import run_fem_spec
 
 from ifenn.config import REPO, fem_run_spec, load_config, validate_config
 from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.studies.metrics import peak
 from ifenn.studies.specimens import specimen_table
 
-ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
 RUN = "three-point-bending"
 
 
@@ -64,14 +60,11 @@ def run_case(config: dict, case: str, work: Path, increments: int | None) -> tup
     spec = fem_run_spec(config, RUN)
     name = case.replace(" ", "_").replace("/", "")
     spec.update(name=name, save_fields=[], checkpoint_every=10**6, load=spec["load"][:increments])
-    folder = work / name
-    folder.mkdir(parents=True, exist_ok=True)
-    write_mesh(build_mesh(spec["scene"]), folder / "mesh.xdmf")
-    (folder / "spec.json").write_text(json.dumps(spec))
+    work.mkdir(parents=True, exist_ok=True)
+    write_mesh(build_mesh(spec["scene"]), work / f"{name}.xdmf")
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "ifenn", "fem", "--spec", str(folder / "spec.json"), "--mesh", str(folder / "mesh.xdmf"),
-                    "--out", str(folder / "fem"), "--no-progress"], check=True, env=ENV, stdout=subprocess.DEVNULL)
-    return pd.read_csv(folder / "fem" / "history.csv"), time.perf_counter() - start
+    history = run_fem_spec(spec, work / f"{name}.xdmf", work)
+    return history, time.perf_counter() - start
 
 
 def main() -> int:

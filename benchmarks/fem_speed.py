@@ -12,20 +12,17 @@ Run on a quiet machine: the numbers are wall times.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from _cli import run_fem_spec
 
 from ifenn.config import REPO, fem_run_spec, load_config
 from ifenn.fem.mesh import build_mesh, write_mesh
 
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1", "OMP_NUM_THREADS": "1"}
 STEPS = ["t_displacement_s", "t_phase_field_s", "t_history_s", "t_increment_s"]
 
 
@@ -37,14 +34,7 @@ def run_case(config, scene, preset, ranks, increments, work: Path) -> pd.DataFra
     mesh = work / f"{scene}.xdmf"
     if not mesh.exists():
         write_mesh(build_mesh(spec["scene"]), mesh)
-    spec_path = work / f"{spec['name']}.json"
-    spec_path.write_text(json.dumps(spec))
-    out = work / spec["name"]
-    command = [sys.executable, "-m", "ifenn", "fem", "--spec", str(spec_path), "--mesh", str(mesh), "--out", str(out), "--no-progress"]
-    if ranks > 1:
-        command = ["mpirun", "-n", str(ranks), "--oversubscribe", *command]
-    subprocess.run(command, check=True, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return pd.read_csv(out / "history.csv")
+    return run_fem_spec(spec, mesh, work, ranks)
 
 
 def main() -> int:

@@ -451,6 +451,13 @@ def finer_reference_dir(config: dict, fine_fem_run: str) -> str:
     return f"results/adaptive/{name}" if name != fine_fem_run else f"results/fem/{fine_fem_run}"
 
 
+def _specimen_differences(config: dict, a: dict, b: dict) -> list[str]:
+    """What keeps two scenes from being the same specimen on other elements: the keys of their
+    geometry, supports, plane and thickness that differ, and 'material' when theirs do."""
+    different = [k for k in ("domain", "notches", "cutouts", "boundary", "plane", "thickness", "symmetry_factor") if a.get(k) != b.get(k)]
+    return different + (["material"] if scene_material(config["material"], a) != scene_material(config["material"], b) else [])
+
+
 def _reference_convergence_problems(config: dict) -> list[str]:
     """A finer reference must be the same specimen, loads and solver settings on more elements."""
     problems = []
@@ -467,7 +474,7 @@ def _reference_convergence_problems(config: dict) -> list[str]:
         scene_c, scene_f = config["scenes"].get(coarse["scene"]), config["scenes"].get(fine["scene"])
         if scene_c is None or scene_f is None:
             continue  # the fem_runs check names the unknown scene
-        different = [k for k in ("domain", "notches", "boundary") if scene_c.get(k) != scene_f.get(k)]
+        different = _specimen_differences(config, scene_c, scene_f)
         different += [k for k in sorted(set(coarse) | set(fine)) if k not in ("scene", "save_fields") and coarse.get(k) != fine.get(k)]
         if different:
             problems.append(f"config key '{key}.fine_fem_run': '{entry['fine_fem_run']}' differs from '{entry['fem_run']}' in "
@@ -520,11 +527,7 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
             if scene not in config["scenes"]:
                 problems.append(f"config key '{key}.scene': '{scene}' is not a scene; allowed: {sorted(config['scenes'])}")
             elif own in config["scenes"]:
-                a, b = config["scenes"][own], config["scenes"][scene]
-                different = [k for k in ("domain", "notches", "cutouts", "boundary", "plane", "thickness") if a.get(k) != b.get(k)]
-                if scene_material(config["material"], a) != scene_material(config["material"], b):
-                    different.append("material")
-                if different:
+                if different := _specimen_differences(config, config["scenes"][own], config["scenes"][scene]):
                     problems.append(f"config key '{key}.scene': '{scene}' differs from '{own}' (the scene of '{entry['fem_run']}') "
                                     f"in {different}; another scene of a run may differ in its elements only")
         merged = {**config["adaptive_mesh"], **entry.get("adaptive_mesh", {})}
@@ -563,12 +566,9 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
     if run not in config.get("adaptive_runs", {}):
         raise ConfigError(f"unknown adaptive run '{run}'; allowed: {sorted(config.get('adaptive_runs', {}))}")
     entry = config["adaptive_runs"][run]
-    own = {k: entry[k] for k in ADAPTIVE_RUN_OVERRIDES if k in entry}
-    if own:   # the FEM run's spec with the entry's scene, schedule or staggering (fem_run_spec resolves them)
-        fem = {**config["fem_runs"][entry["fem_run"]], **own}
-        spec = fem_run_spec({**config, "fem_runs": {**config["fem_runs"], entry["fem_run"]: fem}}, entry["fem_run"])
-    else:
-        spec = fem_run_spec(config, entry["fem_run"])
+    # the FEM run's entry with the adaptive run's own scene, schedule or staggering, resolved as FEM's
+    fem = {**config["fem_runs"][entry["fem_run"]], **{k: entry[k] for k in ADAPTIVE_RUN_OVERRIDES if k in entry}}
+    spec = fem_run_spec({**config, "fem_runs": {**config["fem_runs"], entry["fem_run"]: fem}}, entry["fem_run"])
     if entry.get("ifenn_run"):   # the verified IFENN step's settings (predictor, verification, ...)
         hybrid = ifenn_run_spec(config, entry["ifenn_run"])
         fem_keys = fem_run_spec(config, config["ifenn_runs"][entry["ifenn_run"]]["fem_run"])   # not the IFENN run's loads

@@ -55,8 +55,8 @@ def full_float32_precision() -> None:
     """IEEE float32 (no TF32) for cuDNN convolutions and CUDA matrix products (module doc)."""
     import torch
 
-    torch.backends.cudnn.conv.fp32_precision = "ieee"
-    torch.backends.cuda.matmul.fp32_precision = "ieee"
+    for backend, op in FLOAT32_SETTINGS.values():
+        getattr(getattr(torch.backends, backend), op).fp32_precision = "ieee"
 
 
 def float32_precision() -> dict:

@@ -11,6 +11,7 @@ from ifenn.config import (ConfigError, adaptive_run_spec, adaptive_shared_prefix
                           validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
+from ifenn.studies.specimens import symmetry_factor
 
 try:
     # PETSc's type names once, in the main process (a child process reads them: petsc4py would
@@ -317,4 +318,4 @@ def specimen_factors(specimen):
     fem = list(entry["fem_runs"])
     fem += [config["ifenn_runs"][run]["fem_run"] for run in entry.get("ifenn_runs", [])]
     fem += [config["adaptive_runs"][run]["fem_run"] for run in entry.get("adaptive_runs", [])]
-    return [int(config["scenes"][config["fem_runs"][run]["scene"]].get("symmetry_factor", 1)) for run in fem]
+    return [symmetry_factor(config["scenes"][config["fem_runs"][run]["scene"]]) for run in fem]

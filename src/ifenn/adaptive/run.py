@@ -76,8 +76,8 @@ from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
 from ifenn.errors import NonFiniteResultError
 from ifenn.fem import supports
-from ifenn.fem.loading import largest_change, load_control
-from ifenn.io import progress_bar, provenance
+from ifenn.fem.loading import largest_change, load_control, load_progress, load_progress_bar
+from ifenn.io import provenance
 from ifenn.pixels import PixelGrid, SlitCuts
 
 log = logging.getLogger(__name__)
@@ -315,13 +315,7 @@ class AdaptiveRun:
         save = set(self.spec["save_fields"])
         every = self.spec.get("save_every")   # adaptive steps: fields every save_every increments
         u_previous = self.rows[-1]["u"] if self.rows else 0.0
-        bar = None
-        if self.progress and self.loads.increments:
-            bar = progress_bar(total=self.loads.increments, initial=first - 1, desc=self.spec["name"], unit="inc", dynamic_ncols=True)
-        elif self.progress:   # adaptive steps: progress in micrometres of prescribed displacement
-            bar = progress_bar(total=round(self.loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=self.spec["name"],
-                               unit="um", miniters=1e-12, dynamic_ncols=True,
-                               bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+        bar = load_progress_bar(self.loads, self.spec["name"], first, u_previous) if self.progress else None
         increment = first
         while (u := self.loads.next_load(increment, u_previous)) is not None:
             try:
@@ -339,7 +333,7 @@ class AdaptiveRun:
                 self._checkpoint(increment)
             if bar is not None:
                 bar.set_postfix(F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}", dofs=row["dofs"], refresh=False)
-                bar.update(1 if self.loads.increments else round((u - u_previous) * 1e3, 6))
+                bar.update(load_progress(self.loads, u, u_previous))
             u_previous, increment = u, increment + 1
         if bar is not None:
             bar.close()

@@ -152,5 +152,22 @@ class AdaptiveLoads:
             self.du = min(max(rows[-1]["u"] - rows[-2]["u"], self.du_min), self.du_max)
 
 
+def load_progress_bar(loads, name: str, first: int, u_previous: float):
+    """The progress bar of a run driven by ``loads``: in increments for a fixed schedule (its steps
+    may differ a thousandfold between segments), in micrometres of prescribed displacement for
+    adaptive steps (miniters ~ 0: refreshed on time only). Advance it with :func:`load_progress`."""
+    from ifenn.io import progress_bar
+
+    if loads.increments:
+        return progress_bar(total=loads.increments, initial=first - 1, desc=name, unit="inc", dynamic_ncols=True)
+    return progress_bar(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=name, unit="um",
+                        miniters=1e-12, dynamic_ncols=True, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+
+
+def load_progress(loads, u: float, u_previous: float) -> float:
+    """How far an increment from ``u_previous`` to ``u`` moves :func:`load_progress_bar`'s bar."""
+    return 1 if loads.increments else round((u - u_previous) * 1e3, 6)
+
+
 def load_control(spec: dict):
     return AdaptiveLoads(spec["adaptive"]) if spec.get("adaptive") else FixedLoads(spec["load"])

@@ -29,8 +29,8 @@ from mpi4py import MPI
 from ifenn import run_files
 from ifenn.config import spec_hash
 from ifenn.errors import NonFiniteResultError
-from ifenn.fem.loading import largest_change, load_control
-from ifenn.io import progress_bar, provenance
+from ifenn.fem.loading import largest_change, load_control, load_progress, load_progress_bar
+from ifenn.io import provenance
 
 if TYPE_CHECKING:
     from ifenn.fem.loading import LoadControl
@@ -207,17 +207,7 @@ class StaggeredRun:
         self.switch_increment = self.comm.bcast(
             next((r["increment"] for r in self.rows if r["phi_max"] > spec["switch_phi_max"]), None), root=0)
         u_previous = self.comm.bcast(self.rows[-1]["u"] if self.rank0 and self.rows else 0.0, root=0)
-        bar = None
-        if self.rank0 and self.progress:
-            if loads.increments:
-                # a fixed schedule: progress in increments (its steps may differ a thousandfold between segments)
-                bar = progress_bar(total=loads.increments, initial=first - 1, desc=spec["name"], unit="inc", dynamic_ncols=True)
-            else:
-                # adaptive steps: progress in micrometres of prescribed displacement;
-                # miniters ~ 0: refresh on time only (steps may be a thousand times smaller than others)
-                bar = progress_bar(total=round(loads.u_end * 1e3, 3), initial=round(u_previous * 1e3, 3), desc=spec["name"],
-                                   unit="um", miniters=1e-12, dynamic_ncols=True,
-                                   bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} um [{elapsed}<{remaining}{postfix}]")
+        bar = load_progress_bar(loads, spec["name"], first, u_previous) if self.rank0 and self.progress else None
         increment = first
         while (u := loads.next_load(increment, u_previous)) is not None:
             try:
@@ -239,7 +229,7 @@ class StaggeredRun:
             if bar is not None:
                 bar.set_postfix(inc=increment, u=f"{u:.4g}", F=f"{row['reaction_force']:.4g}", phi_max=f"{row['phi_max']:.3f}",
                                 refresh=False)
-                bar.update(1 if loads.increments else round((u - u_previous) * 1e3, 6))
+                bar.update(load_progress(loads, u, u_previous))
             u_previous, increment = row["u"], increment + 1
             own_s += time.perf_counter() - started
             yield row

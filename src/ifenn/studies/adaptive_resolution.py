@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_run_wall, read_spec
-from ifenn.studies.metrics import fine_label, peak, post_peak_rms, work_of_load
+from ifenn.studies.metrics import fine_label, peak, post_peak_rms, work_rel_error
 
 TARGETS = {"post_peak_rms_pct": 2.0, "peak_error_pct": 1.0, "u_peak_error_pct": 2.0, "work_error_pct": 2.0, "dofs_fraction": 0.30}
 
@@ -56,12 +56,11 @@ def resolution_rows(fem: pd.DataFrame, fine: pd.DataFrame, adaptive: dict[str, p
     for name, (history, method) in runs.items():
         u, force = history.u.to_numpy(), np.abs(history.reaction_force.to_numpy())
         dofs = history.dofs.to_numpy() if "dofs" in history else np.full(len(history), fem_dofs)
-        u_end = min(u[-1], reference[0][-1])
         row = {"run": name, "method": method,
                "post_peak_rms_vs_fine_pct": 100 * post_peak_rms(u, force, *reference),
                "peak_error_vs_fine_pct": float(100 * (force.max() / peak_fine - 1)),
                "u_peak_error_vs_fine_pct": float(100 * (peak(u, force)[1] / u_peak_fine - 1)),
-               "work_error_vs_fine_pct": float(100 * (work_of_load(u, force, u_end) / work_of_load(*reference, u_end) - 1)),
+               "work_error_vs_fine_pct": 100 * work_rel_error(u, force, *reference),
                "wall_s": wall[name or "fem"], "wall_fem_h_s": wall["fem"], "wall_fraction_of_fem_h": wall[name or "fem"] / wall["fem"],
                "dofs_fraction_of_fine": float(dofs.mean() / fine_dofs), "dofs_fraction_of_fine_max": float(dofs.max() / fine_dofs),
                "fine_uniform_dofs": int(fine_dofs),

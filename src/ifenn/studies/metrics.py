@@ -60,6 +60,12 @@ def work_of_load(u: np.ndarray, force: np.ndarray, u_end: float) -> float:
     return float(np.sum(0.5 * (ff[1:] + ff[:-1]) * np.diff(uu)))
 
 
+def work_rel_error(u: np.ndarray, force: np.ndarray, u_ref: np.ndarray, force_ref: np.ndarray) -> float:
+    """The work of the load against a reference's, both up to the end of the shorter curve, - 1."""
+    u_end = min(u[-1], u_ref[-1])
+    return work_of_load(u, force, u_end) / work_of_load(u_ref, force_ref, u_end) - 1.0
+
+
 def u_at_half_drop(u: np.ndarray, force: np.ndarray) -> float:
     """The displacement where the force, after its peak, first falls to half the peak
     (interpolated linearly between increments); NaN if it never does."""

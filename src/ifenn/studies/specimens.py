@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ifenn.studies.metrics import peak, work_of_load
+from ifenn.studies.metrics import peak, work_of_load, work_rel_error
 
 TABLE_COLUMNS = ["run", "peak_force", "u_peak", "work", "u_end", "peak_ratio", "u_peak_ratio", "work_ratio"]
 
@@ -35,7 +35,6 @@ def specimen_table(curves: dict[str, pd.DataFrame], measured: pd.DataFrame) -> p
         u, f = (mu, mf) if frame is None else (frame["u"].to_numpy(float), frame["reaction_force"].to_numpy(float))
         u_end = min(u[-1], mu[-1])
         p, up = peak(u, f)
-        work, m_work = work_of_load(u, f, u_end), work_of_load(mu, mf, u_end)
-        rows.append({"run": label, "peak_force": p, "u_peak": up, "work": work, "u_end": u_end,
-                     "peak_ratio": p / m_peak, "u_peak_ratio": up / m_u, "work_ratio": work / m_work})
+        rows.append({"run": label, "peak_force": p, "u_peak": up, "work": work_of_load(u, f, u_end), "u_end": u_end,
+                     "peak_ratio": p / m_peak, "u_peak_ratio": up / m_u, "work_ratio": 1.0 + work_rel_error(u, f, mu, mf)})
     return pd.DataFrame(rows, columns=TABLE_COLUMNS)

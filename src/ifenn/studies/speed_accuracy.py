@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_spec
-from ifenn.studies.metrics import force_curve_error, post_peak_rms, u_at_half_drop, work_of_load
+from ifenn.studies.metrics import force_curve_error, post_peak_rms, u_at_half_drop, work_rel_error
 
 
 def _label(method: str, spec: dict) -> str:
@@ -53,10 +53,8 @@ def _label(method: str, spec: dict) -> str:
 
 
 def _drop_and_work(u, force, ref_u, ref_force, ref_half: float) -> dict:
-    u_end = min(u[-1], ref_u[-1])
     half = u_at_half_drop(u, force)
-    return {"work_rel_error": work_of_load(u, force, u_end) / work_of_load(ref_u, ref_force, u_end) - 1.0,
-            "u_half_drop": half, "u_half_drop_rel_error": half / ref_half - 1.0}
+    return {"work_rel_error": work_rel_error(u, force, ref_u, ref_force), "u_half_drop": half, "u_half_drop_rel_error": half / ref_half - 1.0}
 
 
 def pareto_front(time: np.ndarray, error: np.ndarray) -> np.ndarray:
