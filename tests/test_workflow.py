@@ -108,6 +108,12 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     table = pd.read_csv(results / "tables" / "speed_accuracy.csv")
     assert {"snt1", "sdnt", "l-panel", "three-point-bending"} == set(table.scene) and table.is_reference.sum() == 4
     assert table.pareto_wall_s.any() and (table.force_l2_rel_error[~table.is_reference] > 0).all()
+    # the work of the load's own front: per scene, the fastest run is on it, and no run on it is
+    # beaten in both wall time and |work error| by another
+    for _, rows in table[~table.is_reference].groupby("scene"):
+        assert rows.pareto_work_wall_s[rows.wall_s.idxmin()]
+        for _, r in rows[rows.pareto_work_wall_s].iterrows():
+            assert not ((rows.wall_s < r.wall_s) & (rows.work_rel_error.abs() < abs(r.work_rel_error))).any()
     stability = pd.read_csv(results / "tables" / "stability.csv")
     assert set(stability.panel) == {"load step", "lc/h", "IFENN option"}
     assert set(stability.label) <= {"ok", "peak off", "crack path wrong", "no load drop", "diverged"}

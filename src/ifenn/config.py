@@ -578,7 +578,9 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
     spec.update(name=run, fem_run=entry["fem_run"], adaptive_mesh=settings)
     if settings.get("linear_solvers"):   # the displacement solve's preset on the adaptive mesh
         preset = config["solver"]["linear_solver_presets"][settings["linear_solvers"]]
-        spec.update(linear_solvers=settings["linear_solvers"], petsc={**spec["petsc"], "displacement": preset["displacement"]})
+        # every displacement key from that preset (options, kept preconditioner, matrix storage), none from the FEM run's
+        petsc = {k: v for k, v in spec["petsc"].items() if not k.startswith("displacement")}
+        spec.update(linear_solvers=settings["linear_solvers"], petsc={**petsc, **{k: v for k, v in preset.items() if k.startswith("displacement")}})
     return spec
 
 

@@ -37,7 +37,16 @@ from petsc4py import PETSc
 from ifenn import geometry
 from ifenn.adaptive.quadtree import Quadtree
 from ifenn.fem import physics, supports
-from ifenn.fem.problem import QUADRATURE, check_converged, configure_ksp, petsc_options
+from ifenn.fem.factor import as_blocks
+from ifenn.fem.problem import (
+    QUADRATURE,
+    IncrementalStiffness,
+    PreconditionerReuse,
+    check_converged,
+    configure_ksp,
+    petsc_options,
+    solve_reusing,
+)
 from ifenn.pixels import PixelGrid
 
 
@@ -51,10 +60,15 @@ class AdaptiveMeshProblem:
     """Equilibrium on one quadtree mesh, with phi and H on the pixel grid (module doc).
 
     ``pixels``: the scene's pixel grid; its spacing times ``pixels_per_fine_cell`` is the
-    quadtree's finest cell.
+    quadtree's finest cell. ``reuse`` (a preset's ``displacement_reuse``) and ``matrix_type`` (its
+    ``displacement_matrix``): as on the uniform mesh (:class:`ifenn.fem.problem.FractureProblem`),
+    the preconditioner is kept across the solves on this mesh, only the cells whose degradation
+    moved are reassembled and a solve starts from the last solution scaled to the new load; with
+    ``baij``, the reduced matrix is factored as 2 x 2 blocks (:func:`ifenn.fem.factor.as_blocks`).
     """
 
-    def __init__(self, tree: Quadtree, scene: dict, material: dict, displacement_options: dict, pixels: PixelGrid):
+    def __init__(self, tree: Quadtree, scene: dict, material: dict, displacement_options: dict, pixels: PixelGrid,
+                 reuse: dict | None = None, matrix_type: str = "aij"):
         self.tree, self.scene, self.material, self.pixels = tree, scene, material, pixels
         ratio = tree.h_fine / pixels.h_px
         self.pixels_per_fine_cell = int(round(ratio))
@@ -80,8 +94,10 @@ class AdaptiveMeshProblem:
         self._build_constraints()
         self._build_boundary_conditions()
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        self.stiffness_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, material) * self.dx)
+        self.stiffness_form = self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, material) * self.dx)
         self.K = fem_petsc.create_matrix(self.stiffness_form)
+        # what IncrementalStiffness reads of a problem: one process owns every cell, no bcs in K
+        self.n_cells_owned, self.owned_q_dofs, self.bcs = n_cells, self.q_dofs.ravel(), []
         # the internal force on the loaded dofs comes from the cells that hold them
         loaded_blocks = np.zeros(self.V.dofmap.index_map.size_local, dtype=bool)
         loaded_blocks[self.block_of_node[np.concatenate([self.free_nodes[self.loaded_dofs // 2],
@@ -95,6 +111,14 @@ class AdaptiveMeshProblem:
         self.ksp = PETSc.KSP().create(self.comm)
         configure_ksp(self.ksp, "displacement_", displacement_options)
         self._displacement_options = dict(displacement_options)
+        self.stiffness = self.reuse = None
+        self._blocks = matrix_type == "baij"
+        self._factored: PETSc.Mat | None = None   # the blocked copy a kept factor was built from
+        self.solved_load: float | None = None     # the load of the solution held in u_reduced
+        if reuse is not None:
+            self.stiffness = IncrementalStiffness(self, reuse["assembly_tolerance"])
+            self.reuse = PreconditionerReuse(reuse)
+            self.scaled_initial_guess = reuse["initial_guess"] == "scaled"
         self._nullspace = self._near_nullspace()
         self.u_reduced = PETSc.Vec().createSeq(self.n_free_dofs)
         self.rhs = PETSc.Vec().createSeq(self.n_free_dofs)
@@ -225,9 +249,14 @@ class AdaptiveMeshProblem:
     def solve_displacement(self, load: float) -> int:
         """Equilibrium with the current phi at the Gauss points and the load on the loaded dofs;
         returns the Krylov iterations."""
-        self.K.zeroEntries()
-        fem_petsc.assemble_matrix(self.K, self.stiffness_form)
-        self.K.assemble()
+        if self.stiffness is None:
+            self.K.zeroEntries()
+            fem_petsc.assemble_matrix(self.K, self.stiffness_form)
+            self.K.assemble()
+        elif self.stiffness.full_assemblies == 0:
+            self.stiffness.assemble_full(self.K)
+        else:
+            self.stiffness.update(self.K)
         self.K_reduced = self.K.PtAP(self.P, result=self.K_reduced)
         self.K_reduced.setNearNullSpace(self._nullspace)
         prescribed = self.u_reduced.duplicate()
@@ -236,17 +265,38 @@ class AdaptiveMeshProblem:
         prescribed.assemble()
         self.rhs.set(0.0)
         self.K_reduced.zeroRowsColumns(self.prescribed, 1.0, prescribed, self.rhs)
+        if self.reuse is not None and self.scaled_initial_guess and self.solved_load and load != self.solved_load:
+            # exact for an unchanged stiffness: the solution is linear in the prescribed displacement
+            self.u_reduced.scale(load / self.solved_load)
         self.u_reduced.setValues(self.prescribed, prescribed.getValues(self.prescribed))   # start on the prescribed values
         self.u_reduced.assemble()
-        self.ksp.setOperators(self.K_reduced)
         if self.ksp.getType() != PETSc.KSP.Type.PREONLY:
             self.ksp.setInitialGuessNonzero(True)
-        with petsc_options("displacement_", self._displacement_options):
-            self.ksp.solve(self.rhs, self.u_reduced)
-        iterations = check_converged(self.ksp, "displacement")
+        if self.reuse is None:
+            self.ksp.setOperators(self.K_reduced)
+            with petsc_options("displacement_", self._displacement_options):
+                self.ksp.solve(self.rhs, self.u_reduced)
+            iterations = check_converged(self.ksp, "displacement")
+        else:
+            if self._factored is None:
+                self.ksp.setOperators(self.K_reduced)   # the kept factor's matrix comes at its refresh
+            iterations = solve_reusing(self.ksp, self.reuse, self.stiffness, self.rhs, self.u_reduced,
+                                       self._displacement_options, refresh=self._refresh_factor)
+        self.solved_load = load
         self.P.mult(self.u_reduced, self.displacement.vector)
         self.displacement.x.scatter_forward()
         return iterations
+
+    def _refresh_factor(self) -> None:
+        """Hand the preconditioner the current reduced matrix (as 2 x 2 blocks with ``baij``): the
+        Krylov operator stays the reduced matrix itself, updated at every solve."""
+        if not self._blocks:
+            self._factored = self.K_reduced
+        else:
+            if self._factored is not None:
+                self._factored.destroy()
+            self._factored = as_blocks(self.K_reduced, 2)
+        self.ksp.setOperators(self.K_reduced, self._factored)
 
     def reaction_force(self) -> float:
         """Sum of the internal force P^T f(u) over the loaded free dofs (N per mm of thickness),
@@ -312,3 +362,4 @@ def transfer_displacement(old: AdaptiveMeshProblem, new: AdaptiveMeshProblem) ->
     weights = np.column_stack([(1 - xi) * (1 - eta), xi * (1 - eta), (1 - xi) * eta, xi * eta])
     values = np.einsum("nk,nkc->nc", weights, u_node[t_old.cells[cell]])
     new.u_reduced.setArray(values.ravel())
+    new.solved_load = old.solved_load

@@ -251,7 +251,9 @@ class AdaptiveRun:
         self.mesh_region = region
         tree = build_quadtree(self._target(region), self.levels, (self.grid.x0, self.grid.y0), self.h_fine, self.slits,
                               self.removed)
-        old, self.problem = self.problem, AdaptiveMeshProblem(tree, self.scene, self.material, self.spec["petsc"]["displacement"], self.grid)
+        petsc = self.spec["petsc"]
+        old, self.problem = self.problem, AdaptiveMeshProblem(tree, self.scene, self.material, petsc["displacement"], self.grid,
+                                                              petsc.get("displacement_reuse"), petsc.get("displacement_matrix", "aij"))
         if old is not None:   # the solve on the new mesh starts from the old solution
             transfer_displacement(old, self.problem)
 

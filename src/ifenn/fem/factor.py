@@ -48,6 +48,28 @@ def _detach() -> None:
     PETSc.garbage_cleanup()
 
 
+def as_blocks(A: PETSc.Mat, bs: int) -> PETSc.Mat:
+    """A serial AIJ matrix whose entries come in dense ``bs`` x ``bs`` blocks (rows bs i .. bs i +
+    bs - 1 share one column pattern, made of whole blocks: Q1 displacements, node by node), as a
+    new BAIJ matrix: the same values, gathered by index arithmetic. PETSc's own conversion visits
+    the entries one by one (seconds at 50k dofs; this: tens of milliseconds)."""
+    indptr, indices, data = A.getValuesCSR()
+    start = indptr[0:-1:bs]
+    length = indptr[1::bs] - start                   # entries of each block row's first row
+    if A.getSize()[0] % bs or (length % bs).any() or any(not np.array_equal(indptr[k + 1::bs] - indptr[k::bs], length)
+                                                        for k in range(1, bs)):
+        raise ValueError(f"the matrix's pattern is not made of {bs} x {bs} blocks")
+    blocks = length // bs
+    block_ptr = np.concatenate([[0], np.cumsum(blocks)])
+    first = np.repeat(start, blocks) + bs * (np.arange(block_ptr[-1]) - np.repeat(block_ptr[:-1], blocks))
+    rows = [first + k * np.repeat(length, blocks) for k in range(bs)]     # each block's first entry, row by row
+    values = np.stack([data[row + j] for row in rows for j in range(bs)], axis=1)
+    if any((indices[row + j] != indices[first] + j).any() for row in rows for j in range(bs)) or (indices[first] % bs).any():
+        raise ValueError(f"the matrix's pattern is not made of {bs} x {bs} blocks")
+    return PETSc.Mat().createBAIJ(A.getSize(), bs, csr=(block_ptr.astype(PETSc.IntType), (indices[first] // bs).astype(PETSc.IntType),
+                                                       values.ravel()), comm=PETSc.COMM_SELF)
+
+
 class NestedDissectionCholesky:
     """petsc4py python-PC context: y = (P^T L L^T P)^-1 x with P the nested-dissection order.
 

@@ -79,6 +79,11 @@ def rigid_body_modes(V) -> PETSc.NullSpace:
     return PETSc.NullSpace().create(vectors=basis)
 
 
+#: an update that changes more than this share of the cells assembles the whole matrix instead
+#: (cheaper: the difference form evaluates two stiffnesses per cell)
+FULL_ASSEMBLY_SHARE = 0.5
+
+
 class IncrementalStiffness:
     """The equilibrium matrix kept up to date by assembling only what changed.
 
@@ -135,8 +140,12 @@ class IncrementalStiffness:
         moved = np.abs(g_now - g_then) > self.tolerance * np.maximum(g_now, g_then)
         cells = np.flatnonzero(moved.any(axis=1)).astype(np.int32)
         self.changed_cells = len(cells)
-        if p.comm.allreduce(len(cells), op=MPI.SUM) == 0:
+        changed, total = p.comm.allreduce(np.array([len(cells), p.n_cells_owned]), op=MPI.SUM)
+        if changed == 0:
             return 0
+        if changed > FULL_ASSEMBLY_SHARE * total:   # the difference form costs twice the full one per cell
+            self.assemble_full(A)
+            return self.changed_cells
         tags = dmesh.meshtags(p.domain, self._tdim, cells, np.ones(len(cells), dtype=np.int32))
         subdomains = {dcpp.fem.IntegralType.cell: tags, dcpp.fem.IntegralType.exterior_facet: None,
                       dcpp.fem.IntegralType.interior_facet: None, dcpp.fem.IntegralType.vertex: None}
@@ -193,6 +202,35 @@ class PreconditionerReuse:
 
     def solved(self, iterations: int) -> None:
         self._last_iterations = iterations
+
+
+def solve_reusing(ksp: PETSc.KSP, policy: PreconditionerReuse, stiffness, b: PETSc.Vec, x: PETSc.Vec, options: dict,
+                  refresh=None) -> int:
+    """Solve with the kept preconditioner unless ``policy`` asks for a fresh one; a solve that
+    fails with a kept one is redone once with a fresh one (from the same start). ``refresh``:
+    called before a fresh preconditioner is built (to hand the KSP the matrix to factor).
+    Returns the Krylov iterations."""
+    pc = ksp.getPC()
+    reason = policy.needs_refresh(stiffness)
+    start = None if reason else x.copy()
+    if reason:
+        if refresh is not None:
+            refresh()
+        policy.refreshed(stiffness, reason)
+    pc.setReusePreconditioner(reason is None)
+    with petsc_options("displacement_", options if reason else {}):
+        ksp.solve(b, x)
+    if ksp.getConvergedReason() < 0 and start is not None:
+        start.copy(x)
+        if refresh is not None:
+            refresh()
+        pc.setReusePreconditioner(False)
+        policy.refreshed(stiffness, "diverged")
+        with petsc_options("displacement_", options):
+            ksp.solve(b, x)
+    iterations = check_converged(ksp, "displacement")
+    policy.solved(iterations)
+    return iterations
 
 
 class FractureProblem:
@@ -368,25 +406,9 @@ class FractureProblem:
         return check_converged(self.ksp_u, "displacement")
 
     def _solve_u_reusing(self) -> int:
-        """Solve with the kept preconditioner unless the policy asks for a fresh one; a solve
-        that fails with a kept one is redone once with a fresh one (from the same start)."""
-        pc, policy = self.ksp_u.getPC(), self.reuse
-        reason = policy.needs_refresh(self.stiffness)
-        start = None if reason else self.displacement.vector.copy()
-        pc.setReusePreconditioner(reason is None)
-        if reason:
-            policy.refreshed(self.stiffness, reason)
-        with petsc_options("displacement_", self._displacement_options if reason else {}):
-            self.ksp_u.solve(self.b_u, self.displacement.vector)
-        if self.ksp_u.getConvergedReason() < 0 and start is not None:
-            start.copy(self.displacement.vector)
-            pc.setReusePreconditioner(False)
-            policy.refreshed(self.stiffness, "diverged")
-            with petsc_options("displacement_", self._displacement_options):
-                self.ksp_u.solve(self.b_u, self.displacement.vector)
+        iterations = solve_reusing(self.ksp_u, self.reuse, self.stiffness, self.b_u, self.displacement.vector,
+                                   self._displacement_options)
         self.displacement.x.scatter_forward()
-        iterations = check_converged(self.ksp_u, "displacement")
-        policy.solved(iterations)
         return iterations
 
     def update_history(self) -> None:

@@ -401,52 +401,68 @@ def stability_map_figure(table, path) -> None:
 
 
 def speed_accuracy_figure(table, path, benchmark=None) -> None:
-    """Per scene (rows): force-curve error against wall time of the whole run (left) and of
-    the propagation stage (middle), log-log, one marker per method family (FEM circles, IFENN
-    squares, whole-path IFENN diamonds, adaptive-mesh runs triangles; hollow: converged
-    staggering; colour: the load schedule), the Pareto front of each panel as a line. Only the
-    front and the reference (drawn at the bottom edge) are labelled by name; every other point
-    carries a number, and the table on the right lists them all with their wall time, error and
-    work of the load. ``benchmark`` (optional, the phase_field_speed table) puts its same-core
-    speed-ups in the title."""
+    """Per scene (rows): force-curve error against wall time of the whole run (first panel) and of
+    the propagation stage (second), and the error in the work of the load (the dissipated energy
+    once the specimen is cut, which does not hinge on where the drop falls) against the whole run's
+    wall (third); log-log, one marker per method family (FEM circles, IFENN squares, whole-path
+    IFENN diamonds, adaptive-mesh runs triangles; hollow: converged staggering; colour: the load
+    schedule), the Pareto front of each panel as a line. Only the front and the reference (drawn
+    at the bottom edge) are labelled by name; every other point carries a number, and the table on
+    the right lists them all with their wall time, error, work of the load and u at the half drop.
+    ``benchmark`` (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
     import textwrap
 
+    from ifenn.studies.speed_accuracy import PARETO
+
     scenes = list(dict.fromkeys(table.scene))
-    fig, axes = plt.subplots(len(scenes), 3, figsize=(19, 6.6 * len(scenes)), squeeze=False,
-                             gridspec_kw={"width_ratios": [1, 1, 0.95]})
+    fig, axes = plt.subplots(len(scenes), 4, figsize=(25, 6.6 * len(scenes)), squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 1, 1.05]})
     schedules = list(dict.fromkeys(table.schedule))
     colours = dict(zip(schedules, plt.cm.tab10(np.arange(len(schedules)) % 10), strict=True))
+    titles = {"wall_s": "whole run", "propagation_wall_s": "propagation stage"}
+    labels = {"force_l2_rel_error": "force-curve L2 error (%) vs the converged reference",
+              "work_abs_error": "|work of the load error| (%) vs the converged reference"}
     for row_axes, scene in zip(axes, scenes, strict=True):
         rows = table[table.scene == scene].reset_index(drop=True)
-        floor = 0.5 * rows.force_l2_rel_error[~rows.is_reference].min()
-        for ax, column, title in ((row_axes[0], "wall_s", "whole run"), (row_axes[1], "propagation_wall_s", "propagation stage")):
+        if "work_abs_error" not in rows:
+            rows["work_abs_error"] = rows.work_rel_error.abs()
+        for ax, (pareto, column, error_column) in zip(row_axes[:3], PARETO, strict=True):
+            if pareto not in rows:
+                ax.axis("off")
+                continue
+            errors = rows[error_column][~rows.is_reference]
+            floor = 0.5 * errors[errors > 0].min() if (errors > 0).any() else 1e-6
             for k, r in rows.iterrows():
-                error = floor if r.is_reference else r.force_l2_rel_error
+                error = max(floor, r[error_column]) if not r.is_reference else floor
                 colour = colours[r.schedule]
                 marker = {"fem": "o", "adaptive": "^"}.get(r.method, "D" if r.variant.endswith("whole path") else "s")
                 ax.scatter(r[column], 100 * error, marker=marker, s=60,
                            facecolor="white" if r.converged else colour,
-                           edgecolor="k" if r[f"pareto_{column}"] else colour, linewidth=1.8, zorder=3)
-                named = r.is_reference or r[f"pareto_{column}"]
+                           edgecolor="k" if r[pareto] else colour, linewidth=1.8, zorder=3)
+                named = r.is_reference or r[pareto]
                 ax.annotate(r.run + (" (reference)" if r.is_reference else "") if named else str(k + 1), (r[column], 100 * error),
                             fontsize=7 if named else 6, xytext=(4, 3), textcoords="offset points",
                             fontweight="bold" if named else "normal")
-            front = rows[rows[f"pareto_{column}"]].sort_values(column)
-            ax.step(front[column], 100 * front.force_l2_rel_error, where="post", color="k", lw=1, alpha=0.6, label="Pareto front")
+            front = rows[rows[pareto]].sort_values(column)
+            ax.step(front[column], 100 * np.maximum(front[error_column], floor), where="post", color="k", lw=1, alpha=0.6,
+                    label="Pareto front")
             ax.set_xscale("log")
             ax.set_yscale("log")
-            ax.set_xlabel(f"wall time, {title} (s, sum of increments)")
-            ax.set_ylabel("force-curve L2 error (%) vs the converged reference")
-            ax.set_title("\n".join(textwrap.wrap(f"{scene}, {title}. Pareto front (no run both faster and more accurate): "
-                                                 + ", ".join(front.run), 70)), fontsize=8)
+            ax.set_xlabel(f"wall time, {titles[column]} (s, sum of increments)")
+            ax.set_ylabel(labels[error_column])
+            what = "work of the load" if error_column == "work_abs_error" else "force curve"
+            ax.set_title("\n".join(textwrap.wrap(f"{scene}, {what}, {titles[column]}. Pareto front (no run both faster and more "
+                                                 "accurate): " + ", ".join(front.run), 62)), fontsize=8)
             ax.grid(True, which="both", alpha=0.3)
-        lines = [f"{'':>3} {'run':<34} {'wall s':>7} {'L2 %':>6} {'work %':>7}"]
+        lines = [f"{'':>3} {'run':<34} {'wall s':>7} {'L2 %':>6} {'work %':>7} {'u half %':>8}"]
         for k, r in rows.iterrows():
-            work = f"{100 * r.work_rel_error:+.1f}" if "work_rel_error" in r and np.isfinite(r.work_rel_error) else "-"
-            lines.append(f"{k + 1:>3} {r.run[:34]:<34} {r.wall_s:>7.3g} {100 * r.force_l2_rel_error:>6.2g} {work:>7}")
-        row_axes[2].axis("off")
-        row_axes[2].text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=6, va="top", transform=row_axes[2].transAxes)
-        row_axes[2].set_title(f"{scene}: every point (reference {rows.reference.iloc[0]})", fontsize=8)
+            work = f"{100 * r.work_rel_error:+.2g}" if np.isfinite(r.get("work_rel_error", np.nan)) else "-"
+            half = f"{100 * r.u_half_drop_rel_error:+.2g}" if np.isfinite(r.get("u_half_drop_rel_error", np.nan)) else "-"
+            lines.append(f"{k + 1:>3} {r.run[:34]:<34} {r.wall_s:>7.3g} {100 * r.force_l2_rel_error:>6.2g} {work:>7} {half:>8}")
+        row_axes[3].axis("off")
+        row_axes[3].text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=6, va="top", transform=row_axes[3].transAxes)
+        row_axes[3].set_title(f"{scene}: every point (reference {rows.reference.iloc[0]}; u half: u where the force "
+                              "has dropped to half its peak)", fontsize=8)
         handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
                    plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
                    plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path (from the first increment)"),
