@@ -259,3 +259,21 @@ def test_crack_advance_ignores_the_diffuse_damage():
     assert largest_change(after, before, floor=0.3) == pytest.approx(0.06)  # 0.29 -> 0.35 crosses the floor
     assert largest_change(after[[0, 1, 3, 4]], before[[0, 1, 3, 4]], floor=0.3) == pytest.approx(0.01)
     assert largest_change(after[:2], before[:2], floor=0.3) == 0.0
+
+
+def test_an_attempt_stops_early_only_when_the_controller_refuses_it_anyway():
+    """refuse_early: past phi_change_max above step_min the attempt is refused whatever its further
+    passes do (judge agrees at that change); at step_min, released, or without the setting, never."""
+    from ifenn.fem.loading import AdaptiveLoads
+
+    settings = {"u_end": 1.0, "step_initial": 0.1, "step_min": 0.01, "step_max": 0.1, "phi_change_max": 0.02,
+                "quiet_fraction": 0.5, "grow": 4.0, "cut": 0.25, "refuse_early": True}
+    loads = AdaptiveLoads(settings)
+    assert not loads.refuses_early(0.02) and loads.refuses_early(0.021)
+    assert loads.judge(0.021, True) is False and loads.du < 0.1
+    loads.du = 0.01   # at step_min: always accepted, so never stopped
+    assert not loads.refuses_early(1.0) and loads.judge(1.0, True)
+    assert not AdaptiveLoads({**settings, "refuse_early": False}).refuses_early(1.0)
+    released = AdaptiveLoads(settings)
+    released.released = True
+    assert not released.refuses_early(1.0)

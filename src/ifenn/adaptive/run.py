@@ -405,13 +405,16 @@ class AdaptiveRun:
             problem.set_phase_field(phi)
             times["t_phase_field_s"] += time.perf_counter() - t
             converged = most == 1 or np.abs(phi - before).max() < spec["stagger_tolerance"]   # one pass: converged by definition
-            done = converged or iteration >= last
+            # refused already (AdaptiveLoads.refuse_early): the remaining passes would be thrown away
+            refused = (not converged and self.loads.adaptive
+                       and self.loads.refuses_early(largest_change(phi, self.phi, self.loads.phi_floor)))
+            done = converged or refused or iteration >= last
             if not (done or carry_on):
                 continue
             t = time.perf_counter()
             core = crack_core(phi, energy, self.material, settings)
             outside = not self.inside_fine(grown(core, settings.trigger_lc, self.material, self.grid.h_px))
-            if outside and remeshes < settings.max_remesh:
+            if outside and remeshes < settings.max_remesh and not refused:
                 pending = pending | grown(core, settings.buffer_lc, self.material, self.grid.h_px)
                 self.build_mesh(pending)
                 remeshes += 1

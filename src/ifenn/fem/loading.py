@@ -29,6 +29,10 @@ class LoadControl(Protocol):
     def judge(self, phi_change: float, converged: bool) -> bool:
         """Accept the attempted increment (True), or refuse it: next_load then gives the retry's load."""
 
+    def refuses_early(self, phi_change: float) -> bool:
+        """Whether an attempt whose phi has moved by ``phi_change`` so far is refused already (its
+        remaining staggered passes can be skipped)."""
+
     def is_last(self, increment: int, u: float) -> bool: ...
 
     def state(self) -> dict:
@@ -56,6 +60,9 @@ class FixedLoads:
 
     def judge(self, phi_change: float, converged: bool) -> bool:
         return True
+
+    def refuses_early(self, phi_change: float) -> bool:
+        return False
 
     def is_last(self, increment: int, u: float) -> bool:
         return increment == len(self.loads)
@@ -87,7 +94,11 @@ class AdaptiveLoads:
     did not converge) is undone and redone with that smaller step, unless it was made at
     ``step_min`` (always accepted); after ``hold_max`` increments in a row at step_min (phi
     creeping without end, e.g. an IFENN crack that never cuts through) the step grows by
-    ``grow`` until phi is quiet again. Ends at ``u_end``."""
+    ``grow`` until phi is quiet again. Ends at ``u_end``. With ``refuse_early``, an attempt with
+    staggering to convergence stops as soon as its phi has moved by more than ``phi_change_max``
+    (above step_min): it is refused whatever its further passes do (while the crack runs they only
+    move phi further), so its remaining passes would be thrown away. Measured on snt1-A-conv on
+    the adaptive mesh: 267 of 904 displacement solves were passes of refused 50-pass attempts."""
 
     adaptive = True
     increments = None
@@ -100,6 +111,7 @@ class AdaptiveLoads:
         self.du = float(settings["step_initial"])  # the load step of the next attempt, mm
         self.hold_max = int(settings.get("hold_max", 500))
         self.phi_floor = float(settings.get("phi_floor", 0.0))
+        self.refuse_early = bool(settings.get("refuse_early", False))
         self.rejected = 0  # rejected attempts since the last accepted increment
         self.held = 0      # consecutive increments accepted at step_min
         self.released = False
@@ -118,6 +130,10 @@ class AdaptiveLoads:
             return self.cut
         target = self.quiet * self.phi_change_max
         return self.grow if phi_change * self.grow <= target else max(target / phi_change, self.cut)
+
+    def refuses_early(self, phi_change: float) -> bool:
+        return (self.refuse_early and not self.released and phi_change > self.phi_change_max
+                and self.du > self.du_min * (1 + 1e-9))
 
     def judge(self, phi_change: float, converged: bool) -> bool:
         """Accept the attempted increment (True) or not; sets the next step either way."""

@@ -271,7 +271,8 @@ class StaggeredRun:
         """Staggered iterations at load ``u`` (Miehe 2010): equilibrium with the current phi,
         then the history, then the phase field, until phi moves by less than the tolerance
         (max norm over the Gauss points) or max_iterations (1: the single pass, converged by
-        definition). Returns (iterations, converged)."""
+        definition), or until the load controller refuses the attempt already (``refuse_early``).
+        Returns (iterations, converged)."""
         p, most = self.problem, self.spec["stagger_max_iterations"]
         previous = phase_field_before
         for iteration in range(1, most + 1):
@@ -283,6 +284,9 @@ class StaggeredRun:
                 self.phase_field.solve()
             if self._max_change(p.phase_field_gp.x.array, previous) < self.spec["stagger_tolerance"]:
                 return iteration, True
+            if iteration < most and self.loads.adaptive and self.loads.refuses_early(self._max_change(p.phase_field_gp.x.array, phase_field_before,
+                                                                              self.loads.phi_floor)):
+                return iteration, False   # refused whatever the remaining passes do (AdaptiveLoads)
             previous = p.phase_field_gp.x.array.copy()
         return most, most == 1
 
