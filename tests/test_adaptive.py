@@ -183,6 +183,49 @@ def test_blocked_copy_of_a_displacement_matrix():
         as_blocks(C, 2)
 
 
+def test_a_grid_the_coarsest_block_does_not_divide_is_padded_not_refined():
+    """A scene of 40 x 20 fine cells with 3 levels (8-cell blocks; 20 is not a multiple of 8): the
+    tree is built on 40 x 24 with the top 4 rows removed, so the far field keeps its 8-cell leaves
+    (only the blocks cut by the top edge split, to 4) where fewer levels would have made every leaf 4
+    cells wide; the mesh covers the scene exactly and passes the patch test (hanging nodes, the
+    top edge loaded)."""
+    from ifenn.adaptive.quadtree import pad
+    from ifenn.adaptive.run import MeshSettings, fine_layout
+    from ifenn.pixels import PixelGrid
+
+    scene = {**SCENE, "domain": {"x": [0.0, 1.0], "y": [0.0, 0.5]}, "elements": [20, 10]}
+    grid = PixelGrid.for_scene(scene)
+    levels, shape, removed = fine_layout(scene, grid, MeshSettings(levels=3))
+    assert (levels, shape, grid.shape) == (3, (24, 40), (20, 40)) and removed[20:].all() and not removed[:20].any()
+    target = np.zeros((20, 40), dtype=int)
+    target[9:11, 18:22] = 3
+    tree = build_quadtree(pad(target, shape, 0), levels, (0.0, 0.0), grid.h_px, removed=removed)
+    assert (tree.cell_size**2).sum() == 20 * 40 and (tree.cell_origin[:, 1] + tree.cell_size <= 20).all()
+    assert (tree.cell_size == 8).sum() >= 4   # far-field leaves at the coarsest size (2 levels: none)
+    problem = _problem(tree, scene)
+    problem.set_phase_field(np.zeros(grid.shape))
+    problem.solve_displacement(1e-3)   # the top at y = 0.5 moved by 1e-3: strain 2e-3
+    assert_uniaxial_plane_strain(problem, 2e-3, 1.0)
+
+
+def test_a_cut_out_keeps_coarse_blocks_whole_and_no_leaf_straddles_its_edge():
+    """pure_levels: a block wholly inside or outside a cut-out stays as coarse as the target lets
+    it; only the blocks its edge crosses split, down to the level where they are pure."""
+    from ifenn.adaptive.quadtree import pure_levels
+
+    removed = np.zeros((32, 32), dtype=bool)
+    removed[12:, 20:] = True      # edges at 12 (a multiple of 4, not 8) and 20 (likewise)
+    level = pure_levels(removed, 3)
+    assert level[0, 0] == 0 and level[31, 31] == 0   # wholly kept / wholly removed 8-blocks
+    assert level[12, 20] == 1 and level[11, 19] == 1  # cut 8-blocks split to pure 4-blocks
+    tree = build_quadtree(np.zeros((32, 32), dtype=int), 3, (0.0, 0.0), 1 / 32, removed=removed)
+    inside = removed[tree.cell_origin[:, 1], tree.cell_origin[:, 0]]
+    assert not inside.any()
+    for (x, y), size in zip(tree.cell_origin, tree.cell_size, strict=True):
+        assert not removed[y:y + size, x:x + size].any()
+    assert (tree.cell_size**2).sum() == (~removed).sum() and tree.cell_size.max() == 8
+
+
 def test_phase_field_at_gauss_points_is_the_pixel_or_its_quadrant_mean():
     tree = _graded_tree()
     problem = _problem(tree)

@@ -49,7 +49,7 @@ class Quadtree:
     levels: int
     leaf_level: np.ndarray          # (ny, nx) int: the level of the leaf holding each fine cell
     slits: list[FineSlit] = field(default_factory=list)
-    #: (ny, nx) bool: fine cells in a cut-out, whose leaves (finest, never straddling) are left out
+    #: (ny, nx) bool: fine cells in a cut-out or the padding, whose leaves (never straddling) are left out
     removed: np.ndarray | None = None
 
     def __post_init__(self):
@@ -214,14 +214,43 @@ def coarsest_levels(nx: int, ny: int, wanted: int) -> int:
     return levels
 
 
+def padded_shape(ny: int, nx: int, levels: int) -> tuple[int, int]:
+    """The fine grid ny x nx grown at the top and right to whole coarsest blocks (2^levels fine
+    cells): the grid a quadtree of ``levels`` levels is built on, the added cells removed (as a
+    cut-out's), so that a scene whose grid the coarsest block does not divide still gets them."""
+    block = 2**levels
+    return -(-ny // block) * block, -(-nx // block) * block
+
+
+def pad(image: np.ndarray, shape: tuple[int, int], fill) -> np.ndarray:
+    """``image`` (ny, nx) in the lower-left corner of an array of ``shape`` filled with ``fill``."""
+    out = np.full(shape, fill, dtype=np.asarray(image).dtype)
+    out[: image.shape[0], : image.shape[1]] = image
+    return out
+
+
+def pure_levels(removed: np.ndarray, levels: int) -> np.ndarray:
+    """Per fine cell, the coarsest level whose block holding it is all removed or all kept: no
+    leaf at that level or finer straddles a cut-out's edge."""
+    ny, nx = removed.shape
+    out = np.full(removed.shape, levels, dtype=np.int64)
+    for level in range(levels - 1, -1, -1):   # finer to coarser: a coarse pure block has pure parts
+        size = 2 ** (levels - level)
+        blocks = removed.reshape(ny // size, size, nx // size, size)
+        pure = blocks.all(axis=(1, 3)) | ~blocks.any(axis=(1, 3))
+        out[np.repeat(np.repeat(pure, size, axis=0), size, axis=1)] = level
+    return out
+
+
 def build_quadtree(target: np.ndarray, levels: int, origin, h_fine: float, slits: list[FineSlit] = (),
                    removed: np.ndarray | None = None) -> Quadtree:
     """The balanced quadtree of a target level map with its slits (module doc), without the fine
-    cells ``removed`` (a cut-out's): they are finest leaves, so no leaf straddles a cut-out's edge,
-    and are left out of the mesh."""
+    cells ``removed`` (a cut-out's, or the padding of :func:`padded_shape`): no leaf straddles
+    their edge (:func:`pure_levels`; a block wholly removed stays coarse), and their leaves are left
+    out of the mesh."""
     slits = list(slits)
     target = np.asarray(target, dtype=np.int64)
     if removed is not None:
-        target = np.where(removed, levels, target)
+        target = np.maximum(target, pure_levels(removed, levels))
     leaf = balanced(slit_targets(target, levels, slits), levels, slits)
     return Quadtree((float(origin[0]), float(origin[1])), float(h_fine), levels, leaf, slits, removed)

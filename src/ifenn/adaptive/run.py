@@ -76,7 +76,7 @@ from pathlib import Path
 import numpy as np
 
 from ifenn import geometry, run_files
-from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, coarsest_levels
+from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, pad, padded_shape
 from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
 from ifenn.errors import NonFiniteResultError
@@ -114,6 +114,21 @@ class MeshSettings:
     @classmethod
     def from_spec(cls, spec: dict) -> MeshSettings:
         return cls(**spec.get("adaptive_mesh", {}))
+
+
+def fine_layout(scene: dict, grid: PixelGrid, settings: MeshSettings) -> tuple[int, tuple[int, int], np.ndarray | None]:
+    """The quadtree's levels, the fine grid it is built on (the scene's, grown at the top and right
+    to whole coarsest blocks: :func:`ifenn.adaptive.quadtree.padded_shape`) and the fine cells left
+    out of every mesh (the scene's cut-outs, ifenn.geometry, and that padding; None if none)."""
+    p = settings.pixels_per_fine_cell
+    ny, nx = grid.ny_px // p, grid.nx_px // p
+    shape = padded_shape(ny, nx, settings.levels)
+    removed = None
+    if scene.get("cutouts"):
+        removed = ~geometry.solid_pixels(scene, PixelGrid(grid.x0, grid.y0, grid.h_px * p, nx, ny))
+    if shape != (ny, nx) or removed is not None:
+        removed = pad(np.zeros((ny, nx), dtype=bool) if removed is None else removed, shape, True)
+    return settings.levels, shape, removed
 
 
 def fine_slits(scene: dict, h_fine: float) -> list[FineSlit]:
@@ -198,11 +213,8 @@ class AdaptiveRun:
         if self.grid.nx_px % p or self.grid.ny_px % p:
             raise ValueError(f"adaptive_mesh.pixels_per_fine_cell = {p} must divide the pixel grid {self.grid.shape}")
         self.n_fine = (self.grid.ny_px // p, self.grid.nx_px // p)
-        self.levels = coarsest_levels(self.n_fine[1], self.n_fine[0], self.settings.levels)
+        self.levels, self.n_padded, self.removed = fine_layout(self.scene, self.grid, self.settings)
         self.slits = fine_slits(self.scene, self.h_fine)
-        # the fine cells of the scene's cut-outs: left out of every mesh (ifenn.geometry)
-        fine_grid = PixelGrid(self.grid.x0, self.grid.y0, self.h_fine, self.n_fine[1], self.n_fine[0])
-        self.removed = ~geometry.solid_pixels(self.scene, fine_grid) if self.scene.get("cutouts") else None
         Gc, lc = self.material["Gc"], self.material["lc"]
         self.equation = PixelEquation(Gc, lc, self.grid.h_px, "replicate", SlitCuts.for_scene(self.scene, self.grid))
         self.loads = load_control(spec)   # fixed, or adaptive steps (ifenn.fem.loading.AdaptiveLoads, as FEM's)
@@ -250,7 +262,7 @@ class AdaptiveRun:
         ny, nx = self.n_fine
         fine = region.reshape(ny, p, nx, p).any(axis=(1, 3))
         fine |= supports.anchor_cells(self.scene, (self.grid.x0, self.grid.y0), self.h_fine, (ny, nx))
-        return np.where(fine, self.levels, 0)
+        return pad(np.where(fine, self.levels, 0), self.n_padded, 0)
 
     def build_mesh(self, region: np.ndarray) -> None:
         from ifenn.adaptive.problem import AdaptiveMeshProblem, transfer_displacement
@@ -268,7 +280,8 @@ class AdaptiveRun:
         """Whether every marked pixel lies in a finest leaf."""
         tree: Quadtree = self.problem.tree
         p = self.settings.pixels_per_fine_cell
-        finest = np.repeat(np.repeat(tree.leaf_level == self.levels, p, axis=0), p, axis=1)
+        ny, nx = self.n_fine
+        finest = np.repeat(np.repeat(tree.leaf_level[:ny, :nx] == self.levels, p, axis=0), p, axis=1)
         return bool(finest[marked].all())
 
     # ------------------------------------------------------------------ state
@@ -312,7 +325,7 @@ class AdaptiveRun:
         problem = self.problem
         run_files.write_state(self.work_dir / f"fields_{increment:06d}.npz", {
             "increment": increment, "u": u, "history": self.history, "phase_field_gp": self.phi, "phase_field": self.phi.ravel(),
-            "displacement": problem.displacement_at_pixels(), "leaf_level": problem.tree.leaf_level,
+            "displacement": problem.displacement_at_pixels(), "leaf_level": problem.tree.leaf_level[: self.n_fine[0], : self.n_fine[1]],
             "region": self.region, "mesh_region": self.mesh_region})
 
     # ------------------------------------------------------------------ loop

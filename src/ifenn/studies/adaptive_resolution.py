@@ -120,15 +120,15 @@ def mesh_states(adaptive_dir, count: int = 3) -> list[dict]:
 
 def tree_maker(spec: dict):
     """leaf_level -> the Quadtree of an adaptive run's mesh (for pictures)."""
-    from ifenn.adaptive.quadtree import Quadtree, coarsest_levels
-    from ifenn.adaptive.run import MeshSettings
+    from ifenn.adaptive.quadtree import Quadtree, pad
+    from ifenn.adaptive.run import MeshSettings, fine_layout
     from ifenn.pixels import PixelGrid
 
     grid, settings = PixelGrid.for_scene(spec["scene"]), MeshSettings.from_spec(spec)
     h_fine = grid.h_px * settings.pixels_per_fine_cell
+    levels, shape, removed = fine_layout(spec["scene"], grid, settings)
 
-    def make(leaf_level: np.ndarray) -> Quadtree:
-        ny, nx = leaf_level.shape
-        return Quadtree((grid.x0, grid.y0), h_fine, coarsest_levels(nx, ny, settings.levels), np.asarray(leaf_level))
+    def make(leaf_level: np.ndarray) -> Quadtree:   # saved on the scene's fine grid; built on the padded one
+        return Quadtree((grid.x0, grid.y0), h_fine, levels, pad(np.asarray(leaf_level), shape, levels), removed=removed)
 
     return make

@@ -714,7 +714,8 @@ def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> 
     for ax, state in zip(axes[0], states, strict=True):
         tree = tree_of(state["leaf_level"])
         x0, y0 = tree.origin
-        extent = [x0, x0 + tree.nx * tree.h_fine, y0, y0 + tree.ny * tree.h_fine]
+        ny, nx = np.shape(state["leaf_level"])   # the scene's fine grid (the tree's may be padded)
+        extent = [x0, x0 + nx * tree.h_fine, y0, y0 + ny * tree.h_fine]
         ax.imshow(state["phase_field_gp"], origin="lower", extent=extent, cmap="Reds", vmin=0, vmax=1)
         corners = tree.origin + tree.h_fine * (tree.cell_origin[:, None, :] + tree.cell_size[:, None, None] * np.array([[0, 0], [1, 0], [1, 1], [0, 1]]))
         ax.add_collection(PolyCollection(corners, facecolors="none", edgecolors="0.25", linewidths=0.15))
