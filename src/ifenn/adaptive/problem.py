@@ -112,6 +112,7 @@ class AdaptiveMeshProblem:
         configure_ksp(self.ksp, "displacement_", displacement_options)
         self._displacement_options = dict(displacement_options)
         self.stiffness = self.reuse = None
+        self.scaled_initial_guess = False
         self._blocks = matrix_type == "baij"
         self._factored: PETSc.Mat | None = None   # the blocked copy a kept factor was built from
         self.solved_load: float | None = None     # the load of the solution held in u_reduced
@@ -253,10 +254,8 @@ class AdaptiveMeshProblem:
             self.K.zeroEntries()
             fem_petsc.assemble_matrix(self.K, self.stiffness_form)
             self.K.assemble()
-        elif self.stiffness.full_assemblies == 0:
-            self.stiffness.assemble_full(self.K)
         else:
-            self.stiffness.update(self.K)
+            self.stiffness.assemble(self.K)
         self.K_reduced = self.K.PtAP(self.P, result=self.K_reduced)
         self.K_reduced.setNearNullSpace(self._nullspace)
         prescribed = self.u_reduced.duplicate()
@@ -265,7 +264,7 @@ class AdaptiveMeshProblem:
         prescribed.assemble()
         self.rhs.set(0.0)
         self.K_reduced.zeroRowsColumns(self.prescribed, 1.0, prescribed, self.rhs)
-        if self.reuse is not None and self.scaled_initial_guess and self.solved_load and load != self.solved_load:
+        if self.scaled_initial_guess and self.solved_load and load != self.solved_load:
             # exact for an unchanged stiffness: the solution is linear in the prescribed displacement
             self.u_reduced.scale(load / self.solved_load)
         self.u_reduced.setValues(self.prescribed, prescribed.getValues(self.prescribed))   # start on the prescribed values

@@ -132,6 +132,13 @@ class IncrementalStiffness:
         self.full_assemblies += 1
         self.changed_cells = p.n_cells_owned
 
+    def assemble(self, A: PETSc.Mat) -> None:
+        """The whole matrix the first time, the change of the cells whose degradation moved after."""
+        if self.full_assemblies == 0:
+            self.assemble_full(A)
+        else:
+            self.update(A)
+
     def update(self, A: PETSc.Mat) -> int:
         """Add the stiffness change of the cells whose degradation moved; returns their number."""
         p = self.problem
@@ -380,10 +387,8 @@ class FractureProblem:
             self.A_u.zeroEntries()
             fem_petsc.assemble_matrix(self.A_u, self.equilibrium_form, bcs=self.bcs)
             self.A_u.assemble()
-        elif self.stiffness.full_assemblies == 0:
-            self.stiffness.assemble_full(self.A_u)
         else:
-            self.stiffness.update(self.A_u)
+            self.stiffness.assemble(self.A_u)
         with self.b_u.localForm() as local:
             local.set(0.0)
         fem_petsc.apply_lifting(self.b_u, [self.equilibrium_form], bcs=[self.bcs])

@@ -284,9 +284,10 @@ class StaggeredRun:
                 self.phase_field.solve()
             if self._max_change(p.phase_field_gp.x.array, previous) < self.spec["stagger_tolerance"]:
                 return iteration, True
-            if iteration < most and self.loads.adaptive and self.loads.refuses_early(self._max_change(p.phase_field_gp.x.array, phase_field_before,
-                                                                              self.loads.phi_floor)):
-                return iteration, False   # refused whatever the remaining passes do (AdaptiveLoads)
+            if iteration < most and self.loads.adaptive:   # refused whatever the remaining passes do (AdaptiveLoads)
+                moved = self._max_change(p.phase_field_gp.x.array, phase_field_before, self.loads.phi_floor)
+                if self.loads.refuses_early(moved):
+                    return iteration, False
             previous = p.phase_field_gp.x.array.copy()
         return most, most == 1
 

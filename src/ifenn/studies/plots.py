@@ -424,12 +424,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
               "work_abs_error": "|work of the load error| (%) vs the converged reference"}
     for row_axes, scene in zip(axes, scenes, strict=True):
         rows = table[table.scene == scene].reset_index(drop=True)
-        if "work_abs_error" not in rows:
-            rows["work_abs_error"] = rows.work_rel_error.abs()
         for ax, (pareto, column, error_column) in zip(row_axes[:3], PARETO, strict=True):
-            if pareto not in rows:
-                ax.axis("off")
-                continue
             errors = rows[error_column][~rows.is_reference]
             floor = 0.5 * errors[errors > 0].min() if (errors > 0).any() else 1e-6
             for k, r in rows.iterrows():
@@ -456,8 +451,8 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
             ax.grid(True, which="both", alpha=0.3)
         lines = [f"{'':>3} {'run':<34} {'wall s':>7} {'L2 %':>6} {'work %':>7} {'u half %':>8}"]
         for k, r in rows.iterrows():
-            work = f"{100 * r.work_rel_error:+.2g}" if np.isfinite(r.get("work_rel_error", np.nan)) else "-"
-            half = f"{100 * r.u_half_drop_rel_error:+.2g}" if np.isfinite(r.get("u_half_drop_rel_error", np.nan)) else "-"
+            work = f"{100 * r.work_rel_error:+.2g}" if np.isfinite(r.work_rel_error) else "-"
+            half = f"{100 * r.u_half_drop_rel_error:+.2g}" if np.isfinite(r.u_half_drop_rel_error) else "-"
             lines.append(f"{k + 1:>3} {r.run[:34]:<34} {r.wall_s:>7.3g} {100 * r.force_l2_rel_error:>6.2g} {work:>7} {half:>8}")
         row_axes[3].axis("off")
         row_axes[3].text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=6, va="top", transform=row_axes[3].transAxes)
