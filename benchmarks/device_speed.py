@@ -126,10 +126,12 @@ def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: fl
     start: the step's median time over a growing crack (the first, cold step untimed; on CUDA
     the whole sequence run once untimed before, as a warm-up)."""
     from ifenn.device import describe
-    from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
+    from ifenn.hybrid.device_step import DeviceVerifiedInference
     from ifenn.hybrid.process_zone import ProcessZoneInference
-    from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+    from ifenn.hybrid.verification import VerifiedInference
     from ifenn.network.orbit import make_evaluator
+    from ifenn.pixel_equation.numpy_backend import PixelEquation
+    from ifenn.pixel_equation.torch_backend import TorchPixelEquation
 
     n_px = images[0].shape[0]
     h_px = 1.0 / n_px
@@ -145,11 +147,11 @@ def verified_rows(model, devices, images, verification: dict, zone: dict, Gc: fl
             step = VerifiedInference(network, PixelEquation(Gc, lc, h_px), *settings, warm_start, history_cap)
         else:
             net = None if warm_start == "previous" else model.to(device).eval()
-            step = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start, history_cap,
+            step = DeviceVerifiedInference(net, TorchPixelEquation(Gc, lc, h_px, device=device), *settings, warm_start, history_cap,
                                            sigma=sigma, network_tolerance=verification["network_tolerance"])
         times, iterations, certificate = [], [], 0.0
         if device.type == "cuda":   # warm-up on a fresh step of the same kind (graphs captured, kernels chosen)
-            warm = DeviceVerifiedInference(net, DevicePixelEquation(Gc, lc, h_px, device=device), *settings, warm_start,
+            warm = DeviceVerifiedInference(net, TorchPixelEquation(Gc, lc, h_px, device=device), *settings, warm_start,
                                            history_cap, sigma=sigma, network_tolerance=verification["network_tolerance"])
             for history in images[:3]:
                 warm(history)

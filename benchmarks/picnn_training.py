@@ -34,8 +34,8 @@ import pandas as pd
 
 from ifenn.config import REPO, load_config
 from ifenn.device import default_devices, describe, resolve_device
-from ifenn.network.picnn import solve_pixel_equation
 from ifenn.network.training import PRESETS, SCORE_CRACK_PHI, resolve_settings, synthetic_history, train_picnn
+from ifenn.pixel_equation.numpy_backend import solve_pixel_equation
 
 
 def read_fields(path: Path, increments: list[int]) -> tuple[float, list[np.ndarray], list[np.ndarray]]:

@@ -79,7 +79,7 @@ def assert_certificate_bounds_the_error(exact, history, Gc, lc, h_px, cuts, seed
     """max |r| (normalised, with the cuts) bounds max |phi - exact| for perturbations of three sizes."""
     import numpy as np
 
-    from ifenn.hybrid.verification import normalised_residual
+    from ifenn.pixel_equation.numpy_backend import normalised_residual
 
     rng = np.random.default_rng(seed)
     for scale in (1e-3, 1e-2, 0.1):

@@ -319,7 +319,7 @@ def test_adaptive_run_that_repeats_another_runs_first_increments_starts_from_its
     that run's saved increment 8 (images and fine regions; the mesh rebuilt from them) ends as
     the run computed from its first increment, with the same rows, meshes and saved fields."""
     from ifenn.adaptive.run import run_adaptive
-    from ifenn.config import spec_hash
+    from ifenn.run_files import spec_hash
 
     source, source_dir, _, _ = adaptive_and_fine
     load = source["load"][:8] + [source["load"][7] + 2e-4 * k for k in range(1, 33)]

@@ -15,8 +15,7 @@ from conftest import assert_certificate_bounds_the_error, assert_uniaxial_plane_
 
 from ifenn import geometry
 from ifenn.fem.mesh import build_mesh
-from ifenn.hybrid.verification import PixelEquation
-from ifenn.network.picnn import laplacian_matrix, solve_pixel_equation
+from ifenn.pixel_equation.numpy_backend import PixelEquation, laplacian_matrix, solve_pixel_equation
 from ifenn.pixels import PixelGrid, SlitCuts
 
 GC, LC = 2.7, 0.15
@@ -133,11 +132,11 @@ def test_exact_solver_and_certificate_on_a_grid_with_a_cut_out():
 
 @pytest.mark.parametrize("compiled", [True, False])
 def test_the_verified_correction_reaches_the_cut_solution(compiled, monkeypatch):
-    import ifenn.hybrid.verification as verification
+    import ifenn.pixel_equation.numpy_backend as numpy_backend
 
     if not compiled:
-        monkeypatch.setattr(verification, "_kernel", lambda: None)
-    elif verification._kernel() is None:
+        monkeypatch.setattr(numpy_backend, "compiled_kernel", lambda: None)
+    elif numpy_backend.compiled_kernel() is None:
         pytest.skip("no C++ compiler: the compiled kernel is not built here")
     grid, cuts, solid = _setup()
     history = _history(grid, solid)
@@ -254,7 +253,7 @@ def test_a_load_on_a_cut_out_edge_is_balanced_by_the_support(quick_config, tmp_p
     from conftest import build_problem
     from dolfinx import fem
 
-    from ifenn.fem import physics
+    from ifenn.models import phase_field_model
 
     scene = copy.deepcopy(L_PANEL)
     scene["boundary"] = {"bottom": {"x": "fixed", "y": "fixed"}, "segments": [SEGMENT]}
@@ -264,7 +263,7 @@ def test_a_load_on_a_cut_out_edge_is_balanced_by_the_support(quick_config, tmp_p
     assert len(loaded) == 3 and np.allclose(loaded[:, 1], 0.5) and np.allclose(sorted(loaded[:, 0]), [0.85, 0.9, 0.95])
     problem.solve_displacement(1e-3)
     v = ufl.TestFunction(problem.V)
-    forces = fem_petsc.assemble_vector(fem.form(physics.equilibrium_form(problem.displacement, v, problem.phase_field_gp, MATERIAL)
+    forces = fem_petsc.assemble_vector(fem.form(phase_field_model().equilibrium_form(problem.displacement, v, problem.phase_field_gp, MATERIAL)
                                                 * problem.dx)).array.reshape(-1, 2)
     foot = np.abs(coordinates[:, 1]) < 1e-12
     load = problem.reaction_force()

@@ -9,8 +9,9 @@ import pytest
 import torch
 
 from ifenn.device import describe, device_record, network_device, resolve_device
-from ifenn.network.picnn import load_picnn, residual, save_picnn
+from ifenn.network.picnn import load_picnn, save_picnn
 from ifenn.network.training import synthetic_history, train_picnn
+from ifenn.pixel_equation.torch_backend import residual
 from ifenn.pixels import PixelGrid, SlitCuts
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
@@ -67,7 +68,9 @@ def test_cuda_without_one_is_refused_before_any_job(paper_config):
 def test_the_config_checks_no_longer_import_the_network():
     """config -> network.settings -> schema: the checks resolve a training preset without torch
     (the circle config -> training -> picnn -> config is gone)."""
-    code = "import sys, ifenn.config as c; c.resolve_settings({'preset': 'tiles'}); print('torch' in sys.modules)"
+    code = ("import sys, yaml, ifenn.config as c; "
+            "c.validate_config(yaml.safe_load((c.REPO / 'config' / 'config.yaml').read_text()), petsc_names=False); "
+            "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False", out.stderr
 

@@ -7,10 +7,12 @@ import pytest
 import scipy.ndimage
 import torch
 
-from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference, gaussian_smoothing
-from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _kernel
-from ifenn.network.picnn import PICNN, InputScaling, solve_pixel_equation
+from ifenn.hybrid.device_step import DeviceVerifiedInference
+from ifenn.hybrid.verification import VerifiedInference
+from ifenn.network.picnn import PICNN, InputScaling
 from ifenn.network.training import synthetic_history
+from ifenn.pixel_equation.numpy_backend import PixelEquation, compiled_kernel, solve_pixel_equation
+from ifenn.pixel_equation.torch_backend import TorchPixelEquation, gaussian_smoothing
 from ifenn.pixels import PixelGrid, SlitCuts
 
 GC, LC = 2.7, 0.03
@@ -44,13 +46,13 @@ def test_the_port_is_the_compiled_correction(padding):
     """Residual and box solves (whole image, a box inside it, a box on the image edge), with the
     slits' cuts on every level: the torch port takes the compiled kernel's iterations to its iterates
     (its V-cycle runs in float32 too, so to round-off, not bit for bit)."""
-    if _kernel() is None:
+    if compiled_kernel() is None:
         pytest.skip("the compiled kernel did not build here: nothing to compare the port with")
     n = 96
     h_px, cuts = _slit_scene(n)
     history = _shear_history(n)
     phi = 0.3 * np.random.default_rng(2).random((n, n))
-    compiled, port = PixelEquation(GC, LC, h_px, padding, cuts), DevicePixelEquation(GC, LC, h_px, padding, cuts)
+    compiled, port = PixelEquation(GC, LC, h_px, padding, cuts), TorchPixelEquation(GC, LC, h_px, padding, cuts)
     whole = (slice(0, n), slice(0, n))
     np.testing.assert_allclose(port.residual(torch.as_tensor(phi), torch.as_tensor(history)).numpy(),
                                compiled.residual_on(phi, history, whole), atol=1e-12)
@@ -71,7 +73,7 @@ def test_the_port_solves_the_cut_equation_to_its_certificate():
     history = _shear_history(n)
     exact = solve_pixel_equation(history, GC, LC, h_px, "replicate", rtol=1e-13, cuts=cuts)
     phi = torch.zeros((n, n), dtype=torch.float64)
-    port = DevicePixelEquation(GC, LC, h_px, "replicate", cuts)
+    port = TorchPixelEquation(GC, LC, h_px, "replicate", cuts)
     worst, iterations = port.solve_box(phi, torch.as_tensor(history), (slice(0, n), slice(0, n)), 1e-5)
     assert worst <= 1e-5 and iterations < 20   # the V-cycle's about tenfold reduction per iteration
     assert np.max(np.abs(phi.numpy() - exact)) <= 1e-5
@@ -86,7 +88,7 @@ def test_the_sums_over_repeated_indices_need_no_atomics(monkeypatch):
     run to run). The step sums them as gathers in a fixed order instead: the restriction is the
     prolongation's transpose (<P^T r, x> = <r, P x>), and the cut equation solves with index_add
     unavailable, to the same phi and iterations as before, bit for bit on a rerun."""
-    from ifenn.hybrid.device_step import DeviceMultigrid
+    from ifenn.pixel_equation.torch_multigrid import DeviceMultigrid
 
     n = 64
     h_px, cuts = _slit_scene(n)
@@ -101,7 +103,7 @@ def test_the_sums_over_repeated_indices_need_no_atomics(monkeypatch):
 
     def solve():
         phi = torch.zeros((n, n), dtype=torch.float64)
-        port = DevicePixelEquation(GC, LC, h_px, "replicate", cuts)
+        port = TorchPixelEquation(GC, LC, h_px, "replicate", cuts)
         worst, iterations = port.solve_box(phi, history, (slice(0, n), slice(0, n)), 1e-5)
         return phi, worst, iterations, port.residual(phi, history)
 
@@ -135,9 +137,9 @@ def test_the_device_step_serves_another_material_through_the_scaled_history():
     h_px, tolerance, gc_b = 0.0025, 1e-3, 0.09
     scale = GC / gc_b
     net = _spoiled_network()
-    own = DeviceVerifiedInference(net, DevicePixelEquation(GC, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
+    own = DeviceVerifiedInference(net, TorchPixelEquation(GC, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
                                   history_cap=45.0)
-    other = DeviceVerifiedInference(net, DevicePixelEquation(gc_b, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
+    other = DeviceVerifiedInference(net, TorchPixelEquation(gc_b, LC, h_px), tolerance, warm_start="increment", sigma=2.0,
                                     history_cap=45.0 / scale, input_scale=scale)
     previous = None
     for x_tip in np.linspace(-0.05, 0.04, 4):
@@ -157,11 +159,11 @@ def test_a_spoiled_network_is_certified_step_after_step_on_a_growing_crack(warm_
     before the certificate is read)."""
     h_px, tolerance = 0.0025, 1e-3
     net = _spoiled_network() if warm_start != "previous" else None
-    equation = DevicePixelEquation(GC, LC, h_px)
+    equation = TorchPixelEquation(GC, LC, h_px)
     device_step = DeviceVerifiedInference(net, equation, tolerance, warm_start=warm_start, sigma=2.0)
     if as_on_a_gpu:
         device_step.global_fraction = 0.0
-        fused = DevicePixelEquation._grid
+        fused = TorchPixelEquation._grid
 
         def grid(self, box, shape):
             cg = fused(self, box, shape)
@@ -200,7 +202,7 @@ def test_the_uncapped_equation_and_the_capped_network_input():
             return iter([torch.zeros(1)])
 
     for cap_history, exact_history in ((True, np.minimum(history, cap)), (False, history)):
-        step = DeviceVerifiedInference(Recording(), DevicePixelEquation(GC, LC, 0.0025), 1e-4, history_cap=cap, cap_history=cap_history)
+        step = DeviceVerifiedInference(Recording(), TorchPixelEquation(GC, LC, 0.0025), 1e-4, history_cap=cap, cap_history=cap_history)
         out = step(history)
         exact = solve_pixel_equation(exact_history, GC, LC, 0.0025, "replicate", rtol=1e-13)
         assert seen[-1] <= cap and np.max(np.abs(out - exact)) <= 1e-4
@@ -214,7 +216,7 @@ def test_cuda_gives_the_cpu_step_to_float_tolerance():
     h_px, cuts = _slit_scene(n)
     history = _shear_history(n)
     phi = 0.3 * np.random.default_rng(2).random((n, n))
-    cpu, gpu = DevicePixelEquation(GC, LC, h_px, "replicate", cuts), DevicePixelEquation(GC, LC, h_px, "replicate", cuts, "cuda")
+    cpu, gpu = TorchPixelEquation(GC, LC, h_px, "replicate", cuts), TorchPixelEquation(GC, LC, h_px, "replicate", cuts, "cuda")
     np.testing.assert_allclose(gpu.residual(torch.as_tensor(phi, device="cuda"), torch.as_tensor(history, device="cuda")).cpu().numpy(),
                                cpu.residual(torch.as_tensor(phi), torch.as_tensor(history)).numpy(), atol=1e-12)
     compiled = VerifiedInference(None, PixelEquation(GC, LC, h_px, "replicate", cuts), 1e-3, warm_start="previous")
@@ -248,7 +250,7 @@ def test_the_device_benchmark_runs_without_dolfinx(tmp_path):
     assert set(table.part) == {"training", "network", "verified"}
     verified = table[table.part == "verified"].set_index("what")
     assert (verified.max_certificate <= verified.tolerance).all()
-    for warm_start in ("previous", "increment") if _kernel() is not None else ():   # the compiled step's own algorithm
+    for warm_start in ("previous", "increment") if compiled_kernel() is not None else ():   # the compiled step's own algorithm
         compiled, port = verified.loc[f"compiled, warm start {warm_start}"], verified.loc[f"torch, warm start {warm_start}"]
         assert compiled.cg_iterations == port.cg_iterations and compiled.max_certificate == pytest.approx(port.max_certificate, rel=1e-3)
 

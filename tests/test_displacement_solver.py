@@ -90,13 +90,13 @@ def test_reaction_from_the_loaded_cells_equals_the_one_from_all_cells(quick_spec
     import ufl
     from dolfinx import fem
 
-    from ifenn.fem import physics
+    from ifenn.models import phase_field_model
 
     spec, kept, _ = _pair(quick_spec, presets, tmp_path)
     kept.phase_field_gp.x.array[:] = np.random.default_rng(2).random(kept.phase_field_gp.x.array.size) * 0.5
     kept.solve_displacement(2e-3)
     v = ufl.TestFunction(kept.V)
-    everywhere = fem.form(physics.equilibrium_form(kept.displacement, v, kept.phase_field_gp, kept.material) * kept.dx)
+    everywhere = fem.form(phase_field_model().equilibrium_form(kept.displacement, v, kept.phase_field_gp, kept.material) * kept.dx)
     vector = fem_petsc.assemble_vector(everywhere)
     full = float(vector.array_r[kept.loaded_dofs].sum())
     assert kept.reaction_force() == pytest.approx(full, rel=1e-12)

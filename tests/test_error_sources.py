@@ -13,7 +13,8 @@ import torch
 from ifenn.config import fem_run_spec, ifenn_run_spec
 from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.fem.solver import run_fem
-from ifenn.network.picnn import PICNN, residual, save_picnn
+from ifenn.network.picnn import PICNN, save_picnn
+from ifenn.pixel_equation.torch_backend import residual
 from ifenn.studies.error_sources import PUBLISHED_PARTS, Replay, crack_band_min, error_sources, postswitch_error, saved_states
 
 

@@ -93,3 +93,29 @@ def test_verified_ifenn_with_a_poor_network_tracks_fem(fem_run, quick_config, tm
     assert _l2(hybrid.reaction_force, fem.reaction_force) < 0.01
     peak = fem.reaction_force.max()
     assert abs(hybrid.reaction_force.iloc[-1] - fem.reaction_force.iloc[-1]) < 0.05 * peak
+
+
+@pytest.mark.parametrize("evaluation", ["orbit", "convolution"])
+def test_the_run_owns_the_history_cap(quick_config, tmp_path, evaluation):
+    """The network is capped at the run's history_cap, not at the one stored with it: at cap 1e6
+    its input reaches 1e6 (a network saved with the published 5e4), and past the cap it is held there."""
+    import torch
+
+    from ifenn.hybrid.runs import network_inference
+    from ifenn.network.picnn import PICNN, InputScaling, load_picnn, save_picnn
+
+    torch.manual_seed(0)
+    net = PICNN(history_cap=5e4, input_scaling=InputScaling("log", 0.01, 45.0), init_gain=0.3).eval()
+    path = tmp_path / "net.pt"
+    save_picnn(net, path, 0.0125, 2.7, 0.15, "test")
+    assert load_picnn(path)[0].history_cap == 5e4
+    spec = {**{k: quick_config["ifenn"][k] for k in IFENN_OPTIONS}, "predictor": "picnn", "inference": "full",
+            "evaluation": evaluation, "smoothing_sigma": None, "history_cap": 1e6}
+    inference = network_inference(spec, path, 0.0125, (8, 8), "cpu")
+    def uncapped(value):   # the network on the scaled input value, no cap of its own
+        return net(net.input_scaling(torch.full((1, 1, 8, 8), value, dtype=torch.float32))).detach().double().numpy()[0, 0]
+
+    for value, seen in ((1e6, 1e6), (2e6, 1e6), (5e4, 5e4)):
+        np.testing.assert_allclose(inference(np.full((8, 8), value)), uncapped(seen), rtol=1e-5, atol=1e-6)
+    # a network held at 5e4 would answer 1e6 as it answers 5e4: the two must differ for the check to mean anything
+    assert np.abs(uncapped(1e6) - uncapped(5e4)).max() > 1e-3

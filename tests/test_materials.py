@@ -10,7 +10,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.config import ConfigError, fem_run_spec, scene_material, validate_config
+from ifenn.config import ConfigError, fem_run_spec, validate_config
+from ifenn.materials import scene_material
 
 E, NU, THICKNESS = 25850.0, 0.18, 100.0
 SQUARE = {"domain": {"x": [0.0, 1.0], "y": [0.0, 1.0]}, "elements": [8, 8],
@@ -131,7 +132,7 @@ def test_the_network_serves_another_material_at_its_lc_over_h_and_is_refused_els
 def test_the_pixel_equation_depends_on_the_material_through_h_lc_over_gc_and_lc_over_h():
     """The identity the network's service rests on: the pixel solution for (Gc, lc, h) and H equals
     the one for (Gc', lc', h') and H (lc / Gc) / (lc' / Gc') when lc / h = lc' / h'."""
-    from ifenn.network.picnn import solve_pixel_equation
+    from ifenn.pixel_equation.numpy_backend import solve_pixel_equation
 
     rng = np.random.default_rng(0)
     x = np.linspace(-1, 1, 48)

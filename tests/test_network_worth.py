@@ -56,10 +56,10 @@ def test_the_change_network_trains_deterministically_and_is_certified_on_states_
     """Trained on two increments of one crack, fed another crack's increments: whatever it answers,
     the check and correction end within the tolerance of the exact pixel solution; the same seed gives
     the same weights."""
-    from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+    from ifenn.hybrid.verification import VerifiedInference
     from ifenn.network.change_net import ChangeNetWarmStart, train_change_net
-    from ifenn.network.picnn import solve_pixel_equation
     from ifenn.network.training import synthetic_history
+    from ifenn.pixel_equation.numpy_backend import PixelEquation, solve_pixel_equation
 
     Gc, lc, h_px = 2.7, 0.03, 0.0025
     seen = [synthetic_history(n_px=64, x_tip=x) for x in (-0.04, -0.03, -0.02)]

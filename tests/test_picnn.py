@@ -5,19 +5,10 @@ import pytest
 import torch
 
 from ifenn.network.orbit import ConvolutionEvaluator, OrbitEvaluator
-from ifenn.network.picnn import (
-    PICNN,
-    InputScaling,
-    SymmetricConv2d,
-    gaussian_smoothing,
-    laplacian_9pt,
-    load_picnn,
-    physics_loss,
-    residual,
-    save_picnn,
-    solve_pixel_equation,
-)
+from ifenn.network.picnn import PICNN, InputScaling, SymmetricConv2d, load_picnn, save_picnn
 from ifenn.network.training import PRESETS, make_tiles, resolve_settings, score_picnn, synthetic_history, train_picnn
+from ifenn.pixel_equation.numpy_backend import gaussian_smoothing, solve_pixel_equation
+from ifenn.pixel_equation.torch_backend import laplacian_9pt, physics_loss, residual
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
 
@@ -110,7 +101,7 @@ def test_pixel_solver_matches_a_direct_solve(small_history, padding):
     import scipy.sparse
     import scipy.sparse.linalg
 
-    from ifenn.network.picnn import laplacian_matrix
+    from ifenn.pixel_equation.numpy_backend import laplacian_matrix
 
     history = small_history[:, :50]  # a rectangle
     matrix = scipy.sparse.diags(GC / LC + 2 * history.ravel()) - GC * LC / H_PX**2 * laplacian_matrix(64, 50, padding)

@@ -52,3 +52,14 @@ def test_config_refuses_a_finer_reference_that_is_not_the_same_specimen(paper_co
     text = str(error.value)
     assert "reference_convergence.snt1-II.fine_fem_run" in text and "['schedule']" in text
     assert f"reference_convergence.snt1-II.ifenn_runs[{len(runs) - 1}]" in text and "continues FEM run 'sdnt'" in text
+
+
+def test_config_refuses_a_finer_reference_of_another_specimen_in_adaptive_resolution(paper_config):
+    """adaptive_resolution's finer reference is checked as reference_convergence's: another specimen
+    (here sdnt's finer run for snt1-II) is refused, naming the key, before any job."""
+    config = copy.deepcopy(paper_config)
+    config["adaptive_resolution"]["snt1-II"]["fine_fem_run"] = "sdnt-fine"
+    with pytest.raises(ValueError) as error:
+        validate_config(config)
+    text = str(error.value)
+    assert "adaptive_resolution.snt1-II.fine_fem_run" in text and "'sdnt-fine' differs from 'snt1-II'" in text

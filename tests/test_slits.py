@@ -7,8 +7,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 from conftest import assert_certificate_bounds_the_error
 
-from ifenn.hybrid.verification import PixelEquation, normalised_residual
-from ifenn.network.picnn import laplacian_matrix, solve_pixel_equation
+from ifenn.pixel_equation.numpy_backend import PixelEquation, laplacian_matrix, normalised_residual, solve_pixel_equation
 from ifenn.pixels import PixelGrid, SlitCuts
 
 GC, LC = 2.7, 0.15
@@ -91,11 +90,11 @@ def test_certificate_holds_on_a_cut_grid():
 def test_correction_reaches_the_cut_solution(compiled, monkeypatch):
     """The verified step's box solve (compiled multigrid-CG, and its numpy fallback) on a box
     that the slit crosses converges to the cut equation's solution, certified."""
-    import ifenn.hybrid.verification as verification
+    import ifenn.pixel_equation.numpy_backend as numpy_backend
 
     if not compiled:
-        monkeypatch.setattr(verification, "_kernel", lambda: None)
-    elif verification._kernel() is None:
+        monkeypatch.setattr(numpy_backend, "compiled_kernel", lambda: None)
+    elif numpy_backend.compiled_kernel() is None:
         pytest.skip("no C++ compiler: the compiled kernel is not built here")
     grid, cuts = _setup()
     history = _history(grid, seed=3)
@@ -115,9 +114,9 @@ def test_multigrid_levels_keep_the_cut():
     level whose cells the slit's line runs between): a cold whole-image solve under shear at
     lc/h_px = 9 (300 x 300 pixels) takes 6 iterations against 4 without a slit (9 when only the
     finest level was cut). The coarse links are those of the slit at the coarser spacing, symmetric."""
-    import ifenn.hybrid.verification as verification
+    import ifenn.pixel_equation.numpy_backend as numpy_backend
 
-    if verification._kernel() is None:
+    if numpy_backend.compiled_kernel() is None:
         pytest.skip("no C++ compiler: the compiled kernel is not built here")
     scene = {**SCENE, "elements": [150, 150]}
     grid, cuts = _setup(scene)
@@ -181,7 +180,7 @@ def test_training_residual_knows_the_slits():
     and the exact cut solution makes it vanish."""
     import torch
 
-    from ifenn.network.picnn import residual
+    from ifenn.pixel_equation.torch_backend import residual
 
     grid, cuts = _setup()
     history = _history(grid, seed=4)
@@ -204,8 +203,9 @@ def test_training_loss_on_crops_knows_the_slits():
     is deterministic for a seed."""
     import torch
 
-    from ifenn.network.picnn import PICNN, physics_loss
+    from ifenn.network.picnn import PICNN
     from ifenn.network.training import make_tiles, train_picnn
+    from ifenn.pixel_equation.torch_backend import physics_loss
 
     grid, cuts = _setup()
     torch.manual_seed(4)
@@ -218,7 +218,7 @@ def test_training_loss_on_crops_knows_the_slits():
     full = physics_loss(model.phase_field(image), image, GC, LC, grid.h_px, "replicate", cuts=cuts)
     tiled = physics_loss(model.phase_field(tiles.history), tiles.history, GC, LC, grid.h_px, "replicate", tiles.weight, stacked)
     torch.testing.assert_close(tiled, full, rtol=1e-10, atol=0.0)
-    from ifenn.network.picnn import residual
+    from ifenn.pixel_equation.torch_backend import residual
 
     with torch.no_grad():  # the cuts change the residual on the slit's two rows of pixels only
         phi = model.phase_field(image)

@@ -103,3 +103,23 @@ def test_only_the_solvers_own_failure_is_labelled_diverged(quick_config, tmp_pat
         with pytest.raises(type(error), match=str(error).split(".")[0]):
             run_cell(spec, tmp_path / "cell")
         assert not (tmp_path / "cell" / "status.json").exists()
+
+
+def test_the_sweep_keeps_a_scene_own_lc(paper_config):
+    """A swept scene with its own material: the cells take its lc (not the config's) both for the
+    scene's lc/h and for the elements each lc/h asks for."""
+    import copy
+
+    config = copy.deepcopy(paper_config)
+    scene = config["scenes"][config["stability"]["scene"]]
+    own_lc = 2.0 * config["material"]["lc"]
+    scene["material"] = {"lc": own_lc}
+    width = scene["domain"]["x"][1] - scene["domain"]["x"][0]
+    base = own_lc / (width / scene["elements"][0])
+    all_cells = cells(config)
+    assert any(c["lc_over_h"] == pytest.approx(base) for c in all_cells.values())
+    for c in all_cells.values():
+        spec = c["spec"]
+        h = width / spec["scene"]["elements"][0]
+        assert spec["material"]["lc"] == own_lc
+        assert own_lc / h == pytest.approx(c["lc_over_h"], rel=0.02)

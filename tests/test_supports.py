@@ -67,11 +67,12 @@ def test_rigid_body_motions_named():
 
 
 def test_config_refuses_a_scene_whose_supports_leave_it_free(quick_config):
-    from ifenn.config import _semantic_problems
+    from ifenn.config.checks import semantic_problems
+    from ifenn.schema import load_schema
 
     config = copy.deepcopy(quick_config)
     config["scenes"]["snt1"]["boundary"] = {"top": {"y": "load"}}
-    found = _semantic_problems(config, petsc_names=False)
+    found = semantic_problems(config, load_schema(), petsc_names=False)
     assert any("config key 'scenes.snt1.boundary'" in p and "rigid-body motion" in p for p in found), found
 
 
@@ -108,13 +109,13 @@ def test_reactions_of_a_simply_supported_beam_on_the_uniform_mesh(quick_config, 
     from conftest import build_problem
     from dolfinx import fem
 
-    from ifenn.fem import physics
+    from ifenn.models import phase_field_model
 
     presets = quick_config["solver"]["linear_solver_presets"]
     problem, _ = build_problem(BEAM, MATERIAL, presets["direct"], tmp_path, "beam")
     problem.solve_displacement(1e-3)
     v = ufl.TestFunction(problem.V)
-    form = fem.form(physics.equilibrium_form(problem.displacement, v, problem.phase_field_gp, MATERIAL) * problem.dx)
+    form = fem.form(phase_field_model().equilibrium_form(problem.displacement, v, problem.phase_field_gp, MATERIAL) * problem.dx)
     forces = fem_petsc.assemble_vector(form).array.reshape(-1, 2)
     reactions = _support_reactions(forces, problem.V.tabulate_dof_coordinates()[:, :2])
     _check_statics(reactions, problem.reaction_force())

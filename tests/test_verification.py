@@ -6,10 +6,12 @@ import pytest
 import torch
 
 from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
-from ifenn.hybrid.verification import PixelEquation, VerifiedInference, _boxes, dilated, normalised_residual
+from ifenn.hybrid.verification import VerifiedInference
 from ifenn.network.orbit import OrbitEvaluator
-from ifenn.network.picnn import PICNN, InputScaling, residual, solve_pixel_equation
+from ifenn.network.picnn import PICNN, InputScaling
 from ifenn.network.training import synthetic_history
+from ifenn.pixel_equation.numpy_backend import PixelEquation, correction_boxes, dilated, normalised_residual, solve_pixel_equation
+from ifenn.pixel_equation.torch_backend import residual
 
 GC, LC, H_PX = 2.7, 0.03, 0.0025
 
@@ -67,13 +69,13 @@ def test_box_solve_with_the_surroundings_as_boundary_data_is_the_exact_solution(
     """Both correction solvers (the compiled multigrid-preconditioned CG, and the numpy CG with
     the sine-transform preconditioner it falls back to) reproduce the exact pixel solution on
     interior, edge, corner, odd-sized and whole-image boxes."""
-    from ifenn.hybrid import verification
+    import ifenn.pixel_equation.numpy_backend as numpy_backend
 
     if solver == "multigrid":
-        if verification._kernel() is None:
+        if numpy_backend.compiled_kernel() is None:
             pytest.skip("the compiled kernel does not build here")
     else:
-        monkeypatch.setattr(verification, "_kernel", lambda: None)
+        monkeypatch.setattr(numpy_backend, "compiled_kernel", lambda: None)
     exact = solve_pixel_equation(history, GC, LC, H_PX, padding, rtol=1e-13)
     equation = PixelEquation(GC, LC, H_PX, padding)
     boxes = [(slice(30, 60), slice(20, 70)), (slice(0, 20), slice(0, 96)), (slice(70, 96), slice(80, 96)),
@@ -100,7 +102,7 @@ def test_correction_boxes_cover_every_pixel_within_the_margin(margin):
             r, c = int(rng.integers(0, ny)), int(rng.integers(0, nx))
             mask[r:r + int(rng.integers(1, 20)), c:c + int(rng.integers(1, 20))] = True
         cover = np.zeros_like(mask)
-        for box in _boxes(mask, margin):
+        for box in correction_boxes(mask, margin):
             cover[box] = True
         assert not (dilated(mask, margin) & ~cover).any()
 

@@ -1,6 +1,7 @@
 """The workflow through Snakemake: the quick profile end to end from another directory,
 and a bad config value stopping everything before any job starts."""
 
+import json
 import os
 import re
 import subprocess
@@ -86,6 +87,30 @@ def test_quick_profile_runs_end_to_end(quick_workflow):
     assert f"{speed.force_l2_rel_error.iloc[1]:.4g}" in summary and "(tables/speed_accuracy.csv)" in summary
     machine = __import__("json").loads((results / "benchmarks" / "machine_speed.json").read_text())
     assert f"{machine['kept_factor_apply_ms']} ms" in summary and "Not produced" not in summary
+
+
+def test_paper_runs_do_not_move(quick_workflow):
+    """The quick DAG's FEM, published IFENN, process-zone, verified, whole-path and adaptive runs
+    compute what they computed before (tests/data/paper_runs/, written by tests/paper_runs.py): every
+    column but the timings to 1e-10 relative on the processor that wrote them; elsewhere to 1e-6
+    (another processor's BLAS kernels round differently, and a crack's growth carries it on)."""
+    import numpy as np
+    from paper_runs import REFERENCES, RUNS, compared_columns, machine, read
+
+    same_machine = json.loads((REFERENCES / "machine.json").read_text()) == machine()
+    rtol = 1e-10 if same_machine else 1e-6
+    for kind, run in RUNS:
+        reference = read(REFERENCES / kind / f"{run}.csv")
+        history = read(quick_workflow / "results" / kind / run / "history.csv")
+        assert compared_columns(history) == list(reference.columns), (kind, run)
+        assert len(history) == len(reference), (kind, run, len(history), len(reference))
+        for column in reference.columns:
+            new, old = history[column].to_numpy(), reference[column].to_numpy()
+            if old.dtype.kind in "fi" and new.dtype.kind in "fi":
+                scale = np.nanmax(np.abs(old), initial=0.0)
+                np.testing.assert_allclose(new, old, rtol=rtol, atol=rtol * scale, equal_nan=True, err_msg=f"{kind}/{run}: {column}")
+            else:
+                assert list(new) == list(old), (kind, run, column)
 
 
 def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):

@@ -75,3 +75,54 @@ def cutout_problems(scene: dict, key: str) -> list[str]:
         if a <= x0 + 1e-12 and b >= x1 - 1e-12 and c <= y0 + 1e-12 and d >= y1 - 1e-12:
             found.append(f"{ckey}: it removes the whole domain")
     return found
+
+
+def domain_is_valid(scene: dict) -> bool:
+    """x[0] < x[1] and y[0] < y[1]: the checks of anything inside the domain need it."""
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    return x0 < x1 and y0 < y1
+
+
+def scene_problems(scene: dict, key: str) -> list[str]:
+    """What the config refuses in a scene's geometry (config key ``key``), before any mesh is built:
+    an empty domain, elements that are not square (the pixel map needs square ones), notches outside
+    the domain, a slit off the mesh lines or not along them, and its cut-outs' problems."""
+    if not domain_is_valid(scene):
+        return [f"config key '{key}.domain': need x[0] < x[1] and y[0] < y[1], got {scene['domain']}"]
+    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+    problems = []
+    hx, hy = (x1 - x0) / scene["elements"][0], (y1 - y0) / scene["elements"][1]
+    if abs(hx - hy) > 1e-9 * hx:  # the test of ifenn.fem.mesh.element_size, before any mesh is built
+        problems.append(f"config key '{key}.elements': {scene['elements']} on the domain {scene['domain']} gives "
+                        f"{hx:g} x {hy:g} mm elements; the pixel map needs square ones (allowed: elements "
+                        f"proportional to the domain's sides, {(x1 - x0) / (y1 - y0):g} : 1)")
+    problems += cutout_problems(scene, key)
+    for i, notch in enumerate(scene.get("notches", [])):
+        problems += _notch_problems(notch, f"{key}.notches[{i}]", (x0, x1, y0, y1), hx)
+    return problems
+
+
+def _notch_problems(notch: dict, key: str, box: tuple[float, float, float, float], h: float) -> list[str]:
+    """A notch's ends inside the domain ``box`` (x0, x1, y0, y1); a slit along a mesh line of spacing
+    ``h``, on it unless it snaps."""
+    x0, x1, y0, y1 = box
+    tol = 1e-12 * max(x1 - x0, y1 - y0)
+    problems = []
+    for end in ("start", "end"):
+        px, py = notch[end]
+        if not (x0 - tol <= px <= x1 + tol and y0 - tol <= py <= y1 + tol):
+            problems.append(f"config key '{key}.{end}': point {notch[end]} lies outside the domain "
+                            f"x in [{x0}, {x1}], y in [{y0}, {y1}]")
+    (sx, sy), (ex, ey) = notch["start"], notch["end"]
+    if notch["kind"] == "slit" and abs(sx - ex) > tol and abs(sy - ey) > tol:
+        problems.append(f"config key '{key}': a slit must be horizontal or vertical (along mesh lines), "
+                        f"got {notch['start']} -> {notch['end']}; use kind 'history' for other notches")
+    if abs(sx - ex) <= tol and abs(sy - ey) <= tol:
+        problems.append(f"config key '{key}': start and end coincide")
+    elif notch["kind"] == "slit" and not notch.get("snap", False):
+        off = [c for c, o in ((sx, x0), (sy, y0), (ex, x0), (ey, y0)) if not on_grid(c, o, h)]
+        if off:
+            problems.append(f"config key '{key}': the slit {notch['start']} -> {notch['end']} has coordinates {off} "
+                            f"between mesh lines (every {h:g} mm from ({x0:g}, {y0:g})); it is not snapped: move its "
+                            f"ends, change the elements, or set '{key}.snap: true' to move it to the nearest line")
+    return problems

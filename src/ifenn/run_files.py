@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import hashlib
 import json
 import os
 import socket
@@ -34,6 +35,12 @@ import numpy as np
 import pandas as pd
 
 from ifenn.io import atomic_path, reading, write_csv, write_json
+
+
+def spec_hash(spec: dict) -> str:
+    """Stable short hash of a spec (canonical JSON), recorded in provenance and checkpoints."""
+    text = json.dumps(spec, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 SPEC, HISTORY, FIELDS, PROVENANCE, STATUS = "spec.json", "history.csv", "fields.h5", "provenance.json", "status.json"
 #: the datasets of a saved increment; the first two are the pixel maps

@@ -7,15 +7,16 @@ from types import SimpleNamespace
 from snakemake.settings.types import DeploymentMethod
 
 from ifenn.config import (ConfigError, adaptive_run_spec, adaptive_shared_prefix, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
-                          paired_runs, scene_material, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
+                          paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
                           validate_config)
 from ifenn.studies import stability as _stability
 from ifenn.studies.metrics import process_zone_pairs
+from ifenn import materials
 from ifenn.studies.specimens import symmetry_factor
 
 try:
     # PETSc's type names once, in the main process (a child process reads them: petsc4py would
-    # start MPI here, and its environment would reach the jobs; ifenn.config._petsc_type_names)
+    # start MPI here, and its environment would reach the jobs; ifenn.config.petsc_names)
     _validated = validate_config(config, petsc_names=workflow.is_main_process)
 except ConfigError as error:
     raise WorkflowError(str(error)) from None
@@ -116,8 +117,7 @@ def fem_priority(wildcards):
 
 
 def lc_over_h(fem_run):
-    scene = config["scenes"][config["fem_runs"][fem_run]["scene"]]
-    return scene_material(config["material"], scene)["lc"] / ((scene["domain"]["x"][1] - scene["domain"]["x"][0]) / scene["elements"][0])
+    return materials.lc_over_h(config["material"], config["scenes"][config["fem_runs"][fem_run]["scene"]])
 
 
 def fem_ranks(wildcards):

@@ -4,13 +4,13 @@ import time
 
 import pandas as pd
 
-from ifenn.config import spec_hash
 from ifenn.device import describe, resolve_device
 from ifenn.io import log_to, provenance, write_csv, write_json
 from ifenn.network.picnn import save_picnn
 from ifenn.network.training import resolve_settings, score_picnn, train_picnn
 from ifenn.network.training_data import read_training_data
 from ifenn.pixels import PixelGrid, SlitCuts
+from ifenn.run_files import spec_hash
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

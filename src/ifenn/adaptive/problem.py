@@ -36,7 +36,7 @@ from petsc4py import PETSc
 
 from ifenn import geometry
 from ifenn.adaptive.quadtree import Quadtree
-from ifenn.fem import physics, supports
+from ifenn.fem import supports
 from ifenn.fem.factor import as_blocks
 from ifenn.fem.problem import (
     QUADRATURE,
@@ -47,6 +47,7 @@ from ifenn.fem.problem import (
     petsc_options,
     solve_reusing,
 )
+from ifenn.models import phase_field_model
 from ifenn.pixels import PixelGrid
 
 
@@ -70,6 +71,7 @@ class AdaptiveMeshProblem:
     def __init__(self, tree: Quadtree, scene: dict, material: dict, displacement_options: dict, pixels: PixelGrid,
                  reuse: dict | None = None, matrix_type: str = "aij"):
         self.tree, self.scene, self.material, self.pixels = tree, scene, material, pixels
+        self.model = phase_field_model(material)   # ifenn.models: g(phi), the driving force, the forms
         ratio = tree.h_fine / pixels.h_px
         self.pixels_per_fine_cell = int(round(ratio))
         if abs(ratio - self.pixels_per_fine_cell) > 1e-9 or self.pixels_per_fine_cell < 1:
@@ -94,7 +96,7 @@ class AdaptiveMeshProblem:
         self._build_constraints()
         self._build_boundary_conditions()
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        self.stiffness_form = self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, material) * self.dx)
+        self.stiffness_form = self.equilibrium_form = fem.form(self.model.equilibrium_form(u, v, self.phase_field_gp, material) * self.dx)
         self.K = fem_petsc.create_matrix(self.stiffness_form)
         # what IncrementalStiffness reads of a problem: one process owns every cell, no bcs in K
         self.n_cells_owned, self.owned_q_dofs, self.bcs = n_cells, self.q_dofs.ravel(), []
@@ -105,7 +107,7 @@ class AdaptiveMeshProblem:
         cells = np.flatnonzero(loaded_blocks[self.V.dofmap.list.array.reshape(n_cells, -1)].any(axis=1)).astype(np.int32)
         tags = dmesh.meshtags(domain, 2, cells, np.ones(len(cells), dtype=np.int32))
         dx_loaded = ufl.Measure("dx", domain=domain, metadata=QUADRATURE, subdomain_data=tags)(1)
-        self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, material) * dx_loaded)
+        self.internal_force_form = fem.form(self.model.equilibrium_form(self.displacement, v, self.phase_field_gp, material) * dx_loaded)
         self.internal_force = fem_petsc.create_vector(self.internal_force_form)
         self.K_reduced = None
         self.ksp = PETSc.KSP().create(self.comm)
@@ -123,7 +125,7 @@ class AdaptiveMeshProblem:
         self._nullspace = self._near_nullspace()
         self.u_reduced = PETSc.Vec().createSeq(self.n_free_dofs)
         self.rhs = PETSc.Vec().createSeq(self.n_free_dofs)
-        self._tensile = physics.tensile_energy_density(self.displacement, material)
+        self._tensile = self.model.driving_force(self.displacement, material)
         self._psi_expressions = {m: fem.Expression(self._tensile, points) for m, (points, _, _) in self._pixel_centres.items()}
         self._u_expressions = {m: fem.Expression(self.displacement, points) for m, (points, _, _) in self._pixel_centres.items()}
 
@@ -312,7 +314,7 @@ class AdaptiveMeshProblem:
         if not hasattr(self, "_internal_force_full_form"):
             v = ufl.TestFunction(self.V)
             self._internal_force_full_form = fem.form(
-                physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * self.dx)
+                self.model.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * self.dx)
         return fem_petsc.assemble_vector(self._internal_force_full_form).array.copy()
 
     @property

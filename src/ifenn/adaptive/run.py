@@ -8,7 +8,7 @@ Per increment (single pass, or staggered to a tolerance as the FEM runs):
 2. H = max(H of the last increment, psi_0^+(u)) at every pixel centre;
 3. phi from the pixel equation (Gc/lc + 2H) phi - Gc lc Lap9(phi) = 2H on the whole image, the
    slits' links cut, solved by the multigrid-preconditioned CG of the verified step
-   (:meth:`ifenn.hybrid.verification.PixelEquation.solve_box`) from the last increment's phi, to
+   (:meth:`ifenn.pixel_equation.numpy_backend.PixelEquation.solve_box`) from the last increment's phi, to
    max |phi - exact pixel solution| <= ``phase_field_tolerance`` (the residual certificate); a
    verified IFENN run (a spec with ``verification`` enabled) instead takes the network's
    prediction on the capped H, checks it and corrects it where it fails
@@ -77,13 +77,13 @@ import numpy as np
 
 from ifenn import geometry, run_files
 from ifenn.adaptive.quadtree import FineSlit, Quadtree, build_quadtree, pad, padded_shape
-from ifenn.config import spec_hash
 from ifenn.device import device_record, network_device
 from ifenn.errors import NonFiniteResultError
 from ifenn.fem import supports
 from ifenn.fem.loading import largest_change, load_control, load_progress, load_progress_bar
 from ifenn.io import provenance
 from ifenn.pixels import PixelGrid, SlitCuts
+from ifenn.run_files import spec_hash
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +135,7 @@ def fine_slits(scene: dict, h_fine: float) -> list[FineSlit]:
     """The scene's slits on its element grid (moved to the nearest line where a slit says
     ``snap: true``), as the uniform mesh's
     (:func:`ifenn.fem.mesh.build_mesh`), in fine-cell units."""
-    from ifenn.fem.mesh import _snap, element_size
+    from ifenn.fem.mesh import element_size, grid_line
 
     h = element_size(scene)
     factor = int(round(h / h_fine))
@@ -149,18 +149,18 @@ def fine_slits(scene: dict, h_fine: float) -> list[FineSlit]:
             continue
         (sx, sy), (ex, ey) = notch["start"], notch["end"]
         if abs(sy - ey) <= abs(sx - ex):
-            a, b = sorted((_snap(sx, x0, h, nx), _snap(ex, x0, h, nx)))
-            out.append(FineSlit(0, factor * _snap(sy, y0, h, ny), factor * a, factor * b))
+            a, b = sorted((grid_line(sx, x0, h, nx), grid_line(ex, x0, h, nx)))
+            out.append(FineSlit(0, factor * grid_line(sy, y0, h, ny), factor * a, factor * b))
         else:
-            a, b = sorted((_snap(sy, y0, h, ny), _snap(ey, y0, h, ny)))
-            out.append(FineSlit(1, factor * _snap(sx, x0, h, nx), factor * a, factor * b))
+            a, b = sorted((grid_line(sy, y0, h, ny), grid_line(ey, y0, h, ny)))
+            out.append(FineSlit(1, factor * grid_line(sx, x0, h, nx), factor * a, factor * b))
     return out
 
 
 def initial_history(scene: dict, material: dict, grid: PixelGrid) -> np.ndarray:
     """H0 of the scene's history notches at the pixel centres (as the uniform FEM's at its
     Gauss points, :meth:`ifenn.fem.problem.FractureProblem.set_initial_history`)."""
-    from ifenn.fem.problem import _distance_to_segment
+    from ifenn.fem.problem import distance_to_segment
 
     notches = [n for n in scene.get("notches", []) if n["kind"] == "history"]
     if not notches:
@@ -168,7 +168,7 @@ def initial_history(scene: dict, material: dict, grid: PixelGrid) -> np.ndarray:
     Gc, lc, B = material["Gc"], material["lc"], material["history_notch_B"]
     xc, yc = grid.pixel_centres()
     points = np.stack(np.meshgrid(xc, yc), axis=-1).reshape(-1, 2)
-    distance = np.min([_distance_to_segment(points, n["start"], n["end"]) for n in notches], axis=0)
+    distance = np.min([distance_to_segment(points, n["start"], n["end"]) for n in notches], axis=0)
     return np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0).reshape(grid.shape)
 
 
@@ -181,9 +181,9 @@ def crack_core(phi: np.ndarray, energy: np.ndarray, material: dict, settings: Me
 
 def grown(core: np.ndarray, by_lc: float, material: dict, h_px: float) -> np.ndarray:
     """``core`` grown by ``by_lc`` phase-field lengths (a square of that half-width), filtered on
-    the core's bounding box only (:func:`ifenn.hybrid.verification.dilated`: the whole-image filter
+    the core's bounding box only (:func:`ifenn.pixel_equation.numpy_backend.dilated`: the whole-image filter
     was 11 % of an increment on an 800 x 800 image)."""
-    from ifenn.hybrid.verification import dilated
+    from ifenn.pixel_equation.numpy_backend import dilated
 
     return dilated(core, int(np.ceil(by_lc * material["lc"] / h_px)))
 
@@ -201,7 +201,7 @@ class AdaptiveRun:
 
     def __init__(self, spec: dict, out_dir: str | Path, progress: bool = True, model_path: str | Path | None = None,
                  device="auto", start_dir: str | Path | None = None):
-        from ifenn.hybrid.verification import PixelEquation
+        from ifenn.pixel_equation.numpy_backend import PixelEquation
 
         self.spec, self.out_dir = spec, Path(out_dir)
         self.work_dir = self.out_dir / run_files.WORK

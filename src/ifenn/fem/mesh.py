@@ -65,7 +65,8 @@ def element_size(scene: dict) -> float:
     return hx
 
 
-def _snap(value: float, origin: float, h: float, n: int) -> int:
+def grid_line(value: float, origin: float, h: float, n: int) -> int:
+    """The index of the mesh line nearest ``value`` (mm) on a grid of ``n`` cells of size ``h`` from ``origin``."""
     return int(min(max(round((value - origin) / h), 0), n))
 
 
@@ -96,12 +97,12 @@ def build_mesh(scene: dict) -> StructuredMesh:
                              "it is snapped only with 'snap: true'")
         horizontal = abs(sy - ey) <= abs(sx - ex)
         if horizontal:
-            line = _snap(sy, y0, h, ny)
-            a, b = sorted((_snap(sx, x0, h, nx), _snap(ex, x0, h, nx)))
+            line = grid_line(sy, y0, h, ny)
+            a, b = sorted((grid_line(sx, x0, h, nx), grid_line(ex, x0, h, nx)))
             n_line, n_along = ny, nx
         else:
-            line = _snap(sx, x0, h, nx)
-            a, b = sorted((_snap(sy, y0, h, ny), _snap(ey, y0, h, ny)))
+            line = grid_line(sx, x0, h, nx)
+            a, b = sorted((grid_line(sy, y0, h, ny), grid_line(ey, y0, h, ny)))
             n_line, n_along = nx, ny
         if line in (0, n_line):
             raise ValueError(f"slit {notch} lies on the domain boundary")

@@ -16,7 +16,6 @@ from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
-from ifenn.fem import physics
 from ifenn.fem.problem import FractureProblem, check_converged, configure_ksp
 
 
@@ -45,7 +44,7 @@ class FEMPhaseField:
     def __init__(self, problem: FractureProblem, options: dict):
         self.problem = problem
         p, q = ufl.TrialFunction(problem.W), ufl.TestFunction(problem.W)
-        a, L = physics.phase_field_forms(p, q, problem.history, problem.material)
+        a, L = problem.model.phase_field_forms(p, q, problem.history, problem.material)
         self.a = fem.form(a * problem.dx)
         self.L = fem.form(L * problem.dx)
         self.A = fem_petsc.create_matrix(self.a)

@@ -22,7 +22,8 @@ from petsc4py import PETSc
 
 from ifenn import geometry
 from ifenn.errors import SolverDivergedError  # noqa: F401 (raised here; importers take it from here too)
-from ifenn.fem import physics, supports
+from ifenn.fem import supports
+from ifenn.models import phase_field_model
 from ifenn.pixels import PixelGrid
 
 QUADRATURE = {"quadrature_degree": 2, "quadrature_scheme": "default"}
@@ -104,8 +105,9 @@ class IncrementalStiffness:
         self.assembled = fem.Function(problem.Q, name="phase_field_assembled")
         domain = problem.domain
         u, v = ufl.TrialFunction(problem.V), ufl.TestFunction(problem.V)
-        difference = (physics.equilibrium_form(u, v, problem.phase_field_gp, problem.material)
-                      - physics.equilibrium_form(u, v, self.assembled, problem.material))
+        model = problem.model
+        difference = (model.equilibrium_form(u, v, problem.phase_field_gp, problem.material)
+                      - model.equilibrium_form(u, v, self.assembled, problem.material))
         self._tdim = domain.topology.dim
         nothing = dmesh.meshtags(domain, self._tdim, np.empty(0, dtype=np.int32), np.empty(0, dtype=np.int32))
         self._form = difference * ufl.Measure("dx", domain=domain, metadata=QUADRATURE, subdomain_data=nothing)(1)
@@ -121,7 +123,7 @@ class IncrementalStiffness:
         self.changed_cells = 0   # of the last update
 
     def degradation(self, phase_field: np.ndarray) -> np.ndarray:
-        return (1.0 - phase_field) ** 2 + self.problem.material["residual_stiffness"]
+        return self.problem.model.degradation(phase_field, self.problem.material["residual_stiffness"])
 
     def assemble_full(self, A: PETSc.Mat) -> None:
         p = self.problem
@@ -250,6 +252,7 @@ class FractureProblem:
 
     def __init__(self, domain, scene: dict, material: dict, petsc: dict, comm=MPI.COMM_WORLD):
         self.domain, self.scene, self.material, self.comm = domain, scene, material, comm
+        self.model = phase_field_model(material)   # ifenn.models: g(phi), the driving force, the forms
         cell = domain.ufl_cell()
         self.V = fem.VectorFunctionSpace(domain, ("Lagrange", 1))
         self.W = fem.FunctionSpace(domain, ("Lagrange", 1))
@@ -289,7 +292,7 @@ class FractureProblem:
         self._build_boundary_conditions()
         self._build_equilibrium(petsc["displacement"], petsc.get("displacement_reuse"), petsc.get("displacement_matrix", "aij"))
         self._tensile_energy = fem.Expression(
-            physics.tensile_energy_density(self.displacement, material),
+            self.model.driving_force(self.displacement, material),
             self.quadrature_points,
         )
         self.set_initial_history()
@@ -333,7 +336,7 @@ class FractureProblem:
         the new load. ``matrix_type`` (a preset's ``displacement_matrix``): PETSc's storage of
         the matrix, aij or baij (2x2 blocks: what ifenn.fem.factor factors fast)."""
         u, v = ufl.TrialFunction(self.V), ufl.TestFunction(self.V)
-        self.equilibrium_form = fem.form(physics.equilibrium_form(u, v, self.phase_field_gp, self.material) * self.dx)
+        self.equilibrium_form = fem.form(self.model.equilibrium_form(u, v, self.phase_field_gp, self.material) * self.dx)
         # the reaction on the loaded dofs comes only from the cells that hold them (owned or
         # ghost dofs: the ghosts' contributions reach their owner in reaction_force)
         index_map = self.V.dofmap.index_map
@@ -343,7 +346,7 @@ class FractureProblem:
         loaded_cells = np.flatnonzero(loaded_blocks[cell_blocks].any(axis=1)).astype(np.int32)
         edge = dmesh.meshtags(self.domain, self.domain.topology.dim, loaded_cells, np.ones(len(loaded_cells), dtype=np.int32))
         dx_loaded = ufl.Measure("dx", domain=self.domain, metadata=QUADRATURE, subdomain_data=edge)(1)
-        self.internal_force_form = fem.form(physics.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * dx_loaded)
+        self.internal_force_form = fem.form(self.model.equilibrium_form(self.displacement, v, self.phase_field_gp, self.material) * dx_loaded)
         # BAIJ in serial only: in parallel the factor is MUMPS's, whose Cholesky takes no BAIJ
         serial_baij = matrix_type == "baij" and self.comm.size == 1
         self.A_u = fem_petsc.create_matrix(self.equilibrium_form, "baij" if serial_baij else None)
@@ -372,7 +375,7 @@ class FractureProblem:
         if notches:
             Gc, lc, B = self.material["Gc"], self.material["lc"], self.material["history_notch_B"]
             coords = self.gauss_point_coordinates.reshape(-1, 2)
-            distance = np.min([_distance_to_segment(coords, n["start"], n["end"]) for n in notches], axis=0)
+            distance = np.min([distance_to_segment(coords, n["start"], n["end"]) for n in notches], axis=0)
             h0 = np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0)
             values[self.q_dofs.ravel()] = h0
         self.history.x.array[:] = values
@@ -478,7 +481,8 @@ class FractureProblem:
         np.take(np.ravel(image), self.pixel_of_q_dof, out=function.x.array, mode="clip")
 
 
-def _distance_to_segment(points: np.ndarray, start, end) -> np.ndarray:
+def distance_to_segment(points: np.ndarray, start, end) -> np.ndarray:
+    """Distance (mm) of each of ``points`` (n, 2) to the segment from ``start`` to ``end``."""
     a, b = np.asarray(start, float), np.asarray(end, float)
     ab = b - a
     t = np.clip(((points - a) @ ab) / (ab @ ab), 0.0, 1.0)

@@ -27,10 +27,10 @@ import numpy as np
 from mpi4py import MPI
 
 from ifenn import run_files
-from ifenn.config import spec_hash
 from ifenn.errors import NonFiniteResultError
 from ifenn.fem.loading import largest_change, load_control, load_progress, load_progress_bar
 from ifenn.io import provenance
+from ifenn.run_files import spec_hash
 
 if TYPE_CHECKING:
     from ifenn.fem.loading import LoadControl

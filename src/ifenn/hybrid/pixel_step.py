@@ -17,7 +17,7 @@ class PixelPhaseField:
 
     ``inference`` (see :mod:`ifenn.hybrid.process_zone`) maps a capped (ny, nx) history image
     (N/mm^2) to a phi image: the trained PICNN on the whole image or on the process zone
-    only, or the exact solution of the same pixel equation (``picnn.solve_pixel_equation``),
+    only, or the exact solution of the same pixel equation (``ifenn.pixel_equation.numpy_backend.solve_pixel_equation``),
     which separates network error from coupling error. Pixel work happens on rank 0;
     Gauss-point fields are scattered back to every rank.
     """

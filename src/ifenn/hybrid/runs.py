@@ -143,7 +143,8 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
     scale = service["history_scale"]
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
-        from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+        from ifenn.hybrid.verification import VerifiedInference
+        from ifenn.pixel_equation.numpy_backend import PixelEquation
 
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
@@ -153,12 +154,13 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
                     warm_start, spec["history_cap"] / scale, verification.get("cap_history", False))
         if verified_step_backend(device) == "torch":   # the whole step on the device (ifenn.hybrid.device_step)
             from ifenn.device import resolve_device
-            from ifenn.hybrid.device_step import DevicePixelEquation, DeviceVerifiedInference
+            from ifenn.hybrid.device_step import DeviceVerifiedInference
             from ifenn.network.picnn import load_picnn
+            from ifenn.pixel_equation.torch_backend import TorchPixelEquation
 
             device = resolve_device(device)
-            model = load_picnn(model_path, device)[0] if warm_start != "previous" else None
-            equation = DevicePixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec), device)
+            model = load_picnn(model_path, device, spec["history_cap"])[0] if warm_start != "previous" else None
+            equation = TorchPixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec), device)
             return DeviceVerifiedInference(model, equation, *settings, sigma=spec["smoothing_sigma"], truncate=spec["smoothing_truncate"],
                                            network_tolerance=verification.get("network_tolerance"), input_scale=scale)
         network = None
@@ -167,13 +169,13 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             zone = spec["process_zone"]
             if verification.get("network_tolerance") is not None:
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
-            network = _network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device, scale)
+            network = network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device, scale)
         equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
         return VerifiedInference(network, equation, *settings)
     if service["fallback"]:
         raise ValueError(f"the network cannot serve this scene's material ({service['fallback']}): run it verified "
                          "(the certified pixel step) or with predictor exact_pixel")
-    return _network_inference(spec, model_path, h_px, shape, device, scale)
+    return network_inference(spec, model_path, h_px, shape, device, scale)
 
 
 def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, device="auto", service: dict | None = None):
@@ -189,7 +191,7 @@ def pixel_phase_field(spec: dict, problem, model_path, comm=MPI.COMM_WORLD, devi
                            spec["history_cap"] / service["history_scale"], spec["irreversible"], verified)
 
 
-def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto", scale: float = 1.0):
+def network_inference(spec: dict, model_path, h_px: float, shape, device="auto", scale: float = 1.0):
     """The network's (or the exact pixel solve's) inference; ``scale``: the network is fed
     ``scale`` H (:class:`ScaledHistory`, another material's H in its own units)."""
     from ifenn.hybrid.process_zone import FullInference, ProcessZoneInference
@@ -201,7 +203,7 @@ def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"
         from ifenn.network.picnn import load_picnn
 
         device = resolve_device(device)
-        model, _ = load_picnn(model_path, device)
+        model, _ = load_picnn(model_path, device, spec["history_cap"])   # the run owns the cap (in the network's units)
         # the orbit sums are a CPU kernel; on a GPU the network's own convolutions
         evaluator = make_evaluator(model, spec.get("evaluation", "orbit") if device.type == "cpu" else "convolution")
         if spec.get("inference", "full") == "process_zone":
@@ -215,7 +217,7 @@ def _network_inference(spec: dict, model_path, h_px: float, shape, device="auto"
             inference = FullInference(evaluator.predict, sigma, truncate, evaluator.kernel)
         return inference if scale == 1.0 else ScaledHistory(inference, scale)
     if spec["predictor"] == "exact_pixel":
-        from ifenn.network.picnn import solve_pixel_equation
+        from ifenn.pixel_equation.numpy_backend import solve_pixel_equation
 
         if spec.get("inference", "full") != "full":
             raise ValueError("inference 'process_zone' needs the local PICNN; the exact pixel solve is global: use 'full'")

@@ -1,7 +1,7 @@
 """Verified phase-field step: every prediction checked by the pixel equation it was trained
 on, and corrected where it fails.
 
-The pixel equation (the PICNN's physics loss, :func:`ifenn.network.picnn.residual`) at pixel i:
+The pixel equation (the PICNN's physics loss, :func:`ifenn.pixel_equation.torch_backend.residual`) at pixel i:
 
     R_i(phi) = (Gc/lc + 2 H_i) phi_i - D (K9*(phi)_i - 3 phi_i) - 2 H_i,   D = Gc lc / h_px^2,
 
@@ -82,279 +82,17 @@ import logging
 import time
 
 import numpy as np
-import scipy.fft
-import scipy.ndimage
 
-from ifenn.errors import SolverDivergedError
-from ifenn.pixels import LAPLACIAN_K9_STAR, Box, SlitCuts, box_area, grow_box
+from ifenn.pixel_equation.numpy_backend import PixelEquation, bounding_box, correction_boxes
+from ifenn.pixels import box_area, grow_box
 from ifenn.schema import schema_defaults
 
 log = logging.getLogger(__name__)
 
 #: the settings' defaults: those of the config schema ('ifenn.verification')
-_DEFAULTS = schema_defaults("verification")
-
-
-def _kernel():
-    from ifenn.network.orbit_kernel import load
-
-    return load()
+VERIFICATION_DEFAULTS = schema_defaults("verification")
 
 WARM_STARTS = ("network", "increment", "previous")
-
-
-def _stencil_sum(padded: np.ndarray) -> np.ndarray:
-    """K9*(x) of the interior of a once-padded array (n + 2, m + 2) -> (n, m)."""
-    edge = padded[1:-1, :-2] + padded[1:-1, 2:] + padded[:-2, 1:-1] + padded[2:, 1:-1]
-    corner = padded[:-2, :-2] + padded[:-2, 2:] + padded[2:, :-2] + padded[2:, 2:]
-    return LAPLACIAN_K9_STAR[0, 1] * edge + LAPLACIAN_K9_STAR[0, 0] * corner
-
-
-def normalised_residual(phi, history, Gc, lc, h_px, padding="replicate", cuts: SlitCuts | None = None) -> np.ndarray:
-    """r = R / (Gc/lc + 2H) on the whole image: an upper bound, in the max norm, of
-    |phi - exact| (module doc). R is the residual of :func:`ifenn.network.picnn.residual`,
-    with the stencil links that ``cuts`` (the scene's slits) cut left out."""
-    phi, history = np.asarray(phi, dtype=np.float64), np.asarray(history, dtype=np.float64)
-    return PixelEquation(Gc, lc, h_px, padding, cuts).residual_on(phi, history, (slice(0, phi.shape[0]), slice(0, phi.shape[1])))
-
-
-class PixelEquation:
-    """The pixel equation of one image: residuals and local solves on boxes. ``cuts``: the
-    stencil links the scene's slits cut (:class:`ifenn.pixels.SlitCuts`; None: no slit)."""
-
-    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None):
-        if padding not in ("replicate", "zeros"):
-            raise ValueError(f"pixel equation padding must be 'replicate' or 'zeros', got {padding!r}")
-        self.Gc, self.lc, self.h_px, self.padding = Gc, lc, h_px, padding
-        self.cuts = cuts if cuts else None
-        self._coarse_cache: dict = {}   # box -> the coarse levels' cut links (_level_links)
-        self.diffusion = Gc * lc / h_px**2
-        self.reaction0 = Gc / lc
-
-    def _extended(self, phi: np.ndarray, box: Box) -> np.ndarray:
-        """phi on ``box`` with a one-pixel frame: image values where the box is inside, the
-        padding where it meets the image edge (float64, contiguous)."""
-        (r0, r1), (c0, c1) = (box[0].start, box[0].stop), (box[1].start, box[1].stop)
-        ny, nx = phi.shape
-        inner = phi[max(r0 - 1, 0):min(r1 + 1, ny), max(c0 - 1, 0):min(c1 + 1, nx)]
-        widths = ((int(r0 == 0), int(r1 == ny)), (int(c0 == 0), int(c1 == nx)))
-        if not any(any(w) for w in widths):
-            return np.array(inner, dtype=np.float64)
-        return np.pad(inner.astype(np.float64, copy=False), widths, mode="edge" if self.padding == "replicate" else "constant")
-
-    def _operator(self, ext: np.ndarray, history: np.ndarray, with_rhs: bool) -> np.ndarray:
-        """(a c - D (K9*(c) - 3 c) [- 2 H]) for the centre c of ``ext``, a = Gc/lc + 2 H, in numpy
-        (the fallback of the compiled residual and correction)."""
-        centre = ext[1:-1, 1:-1]
-        out = (self.reaction0 + 2.0 * history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
-        return out - 2.0 * history if with_rhs else out
-
-    def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool = True) -> np.ndarray:
-        """Residual on ``box`` (its own shape): r = R / (Gc/lc + 2H), or R itself; in one pass of
-        the compiled kernel where it builds (read from the image: no padded copy), else in numpy;
-        the slits' cut links are then taken out (R += D x their flux)."""
-        if self.cuts is None:
-            return self._residual_uncut(phi, history, box, normalised)
-        residual = self._residual_uncut(phi, history, box, False) + self.diffusion * self.cuts.flux_on(phi, box)
-        return residual / (self.reaction0 + 2.0 * history[box]) if normalised else residual
-
-    def _residual_uncut(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool) -> np.ndarray:
-        lib = _kernel()
-        if lib is not None:
-            phi, history = np.ascontiguousarray(phi, dtype=np.float64), np.ascontiguousarray(history, dtype=np.float64)
-            ny, nx = phi.shape
-            out = np.empty((box[0].stop - box[0].start, box[1].stop - box[1].start))
-            lib.ifenn_pixel_residual(phi.ctypes.data, history.ctypes.data, out.ctypes.data, ny, nx, box[0].start, box[0].stop,
-                                     box[1].start, box[1].stop, self.reaction0, self.diffusion, int(self.padding == "replicate"),
-                                     int(normalised))
-            return out
-        h = history[box]
-        residual = self._operator(self._extended(phi, box), h, True)
-        return residual / (self.reaction0 + 2.0 * h) if normalised else residual
-
-    def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool], links=None) -> np.ndarray:
-        """A x on a box (``history``: H there) for x with zero Dirichlet data around it (the
-        padding on image edges); ``links``: the slits' cut links in the box (SlitCuts.in_box)."""
-        out = self._apply_uncut(x, history, edges)
-        if links is not None and links[0].size:
-            rows, cols, weights = links
-            flat = x.reshape(-1)
-            np.add.at(out.reshape(-1), rows, self.diffusion * weights * (np.where(cols >= 0, flat[np.maximum(cols, 0)], 0.0) - flat[rows]))
-        return out
-
-    def _apply_uncut(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool]) -> np.ndarray:
-        ext = np.zeros((x.shape[0] + 2, x.shape[1] + 2))
-        ext[1:-1, 1:-1] = x
-        if self.padding == "replicate":
-            bottom, top, left, right = edges
-            if bottom:
-                ext[0, 1:-1] = x[0]
-            if top:
-                ext[-1, 1:-1] = x[-1]
-            if left:
-                ext[:, 0] = ext[:, 1]
-            if right:
-                ext[:, -1] = ext[:, -2]
-        return self._operator(ext, history, False)
-
-    def _preconditioner(self, box: Box, shape: tuple[int, int], reaction: np.ndarray):
-        """The exact inverse of the constant-coefficient operator min(a) I - D (K9* - 3 I) on
-        the box, by a fast sine transform (zero Dirichlet data around the box: exact there) or,
-        for the whole image, by the image padding's own transform (as the global pixel solver)."""
-        from ifenn.network.picnn import _fast_transforms, _laplacian_symbol
-
-        n, m = box[0].stop - box[0].start, box[1].stop - box[1].start
-        if (n, m) == tuple(shape):
-            symbol = reaction.min() - self.diffusion * _laplacian_symbol(n, m, self.padding)
-            forward, inverse = _fast_transforms(self.padding)
-            return lambda r: inverse(forward(r) / symbol)
-        s_y = 2.0 * np.cos(np.pi * np.arange(1, n + 1) / (n + 1))[:, None]
-        s_x = 2.0 * np.cos(np.pi * np.arange(1, m + 1) / (m + 1))[None, :]
-        symbol = reaction.min() - self.diffusion * (0.5 * (s_x + s_y) + 0.25 * s_x * s_y - 3.0)
-        return lambda r: scipy.fft.dstn(scipy.fft.dstn(r, type=1, norm="ortho") / symbol, type=1, norm="ortho")
-
-    def _level_links(self, box: Box, links) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The cut links of every multigrid level of ``box`` for the compiled V-cycle: per level
-        the count, then rows / cols / weights one level after another (the finest: ``links``, the
-        box's own; the coarser: the slits redrawn at each level's spacing, cached per box). The
-        levels halve as the kernel's (``mg_work``): while both sides exceed 4, at most 16."""
-        if links is None:
-            return np.zeros(0, np.intc), np.zeros(0, np.intc), np.zeros(0, np.intc), np.zeros(0)
-        key = (box[0].start, box[0].stop, box[1].start, box[1].stop)
-        cache = self._coarse_cache
-        if key not in cache:
-            shape, levels = (box[0].stop - box[0].start, box[1].stop - box[1].start), []
-            while shape[0] > 4 and shape[1] > 4 and len(levels) < 15:
-                shape = ((shape[0] + 1) // 2, (shape[1] + 1) // 2)
-                levels.append(self.cuts.coarse_links(box, len(levels) + 1, shape))
-            if len(cache) > 64:
-                cache.clear()
-            cache[key] = levels
-        parts = [links, *cache[key]]
-        counts = np.array([len(p[0]) for p in parts], dtype=np.intc)
-        return (counts, np.ascontiguousarray(np.concatenate([p[0] for p in parts]), dtype=np.intc),
-                np.ascontiguousarray(np.concatenate([p[1] for p in parts]), dtype=np.intc),
-                np.ascontiguousarray(np.concatenate([p[2] for p in parts]), dtype=np.float64))
-
-    def solve_box(self, phi: np.ndarray, history: np.ndarray, box: Box, target: float, maxiter: int = 1000) -> tuple[float, int]:
-        """Solve the pixel equation on ``box`` in place in ``phi`` (the values around the box
-        fixed), to max |r| <= ``target`` inside it, by conjugate gradients preconditioned with a
-        multigrid V-cycle (compiled kernel), else with the constant-coefficient inverse
-        (:meth:`_preconditioner`). Returns (max |r| reached, iterations); raises if ``maxiter``
-        iterations do not get there."""
-        ny, nx = phi.shape
-        edges = (box[0].start == 0, box[0].stop == ny, box[1].start == 0, box[1].stop == nx)
-        h = np.ascontiguousarray(history[box])
-        reaction = self.reaction0 + 2.0 * h
-        links = self.cuts.in_box(box) if self.cuts is not None else None
-        lib = _kernel()
-        if lib is not None:  # multigrid-preconditioned CG, compiled
-            # the correction delta solves A delta = -R(phi), zero around the box
-            residual = -self.residual_on(phi, history, box, normalised=False)
-            centre = phi[box]
-            delta = np.empty(centre.shape)
-            replicate = np.array(edges if self.padding == "replicate" else (False,) * 4, dtype=np.intc)
-            worst = np.zeros(1)
-            counts, rows, cols, weights = self._level_links(box, links)
-            iterations = lib.ifenn_pixel_mg_pcg(residual.ctypes.data, np.ascontiguousarray(reaction).ctypes.data, delta.ctypes.data,
-                                                delta.shape[0], delta.shape[1], self.diffusion, replicate.ctypes.data, target, maxiter,
-                                                worst.ctypes.data, counts.size, counts.ctypes.data, rows.ctypes.data, cols.ctypes.data,
-                                                weights.ctypes.data)
-            if iterations < 0:
-                raise SolverDivergedError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
-                                   f"(reached {worst[0]:g})")
-            phi[box] += delta
-            return float(worst[0]), int(iterations)
-        ext = self._extended(phi, box)
-        centre = ext[1:-1, 1:-1]
-        residual = -self.residual_on(phi, history, box, normalised=False)
-        worst = float(np.max(np.abs(residual) / reaction))
-        iterations = 0
-        delta = np.zeros_like(centre)
-        if worst > target:
-            precondition = self._preconditioner(box, phi.shape, reaction)
-            z = precondition(residual)
-            direction = z.copy()
-            rz = float(np.vdot(residual, z))
-            while True:
-                if iterations == maxiter:
-                    raise SolverDivergedError(f"pixel correction on {box} did not reach max |r| = {target:g} in {maxiter} iterations "
-                                       f"(reached {worst:g})")
-                iterations += 1
-                a_dir = self._apply(direction, h, edges, links)
-                alpha = rz / float(np.vdot(direction, a_dir))
-                delta += alpha * direction
-                residual -= alpha * a_dir
-                worst = float(np.max(np.abs(residual) / reaction))
-                if worst <= target:
-                    break
-                z = precondition(residual)
-                rz_new = float(np.vdot(residual, z))
-                direction = z + (rz_new / rz) * direction
-                rz = rz_new
-        phi[box] = centre + delta
-        return worst, iterations
-
-
-def _bounding_box(mask: np.ndarray, grow: int) -> Box | None:
-    """The bounding box of ``mask``'s pixels grown by ``grow`` (clipped), None if empty."""
-    rows, cols = np.nonzero(np.any(mask, axis=1))[0], np.nonzero(np.any(mask, axis=0))[0]
-    if rows.size == 0:
-        return None
-    return grow_box((slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1)), grow, mask.shape)
-
-
-def dilated(mask: np.ndarray, by: int) -> np.ndarray:
-    """``mask`` grown by ``by`` pixels (square), computed on its bounding box only."""
-    crop = _bounding_box(mask, by)
-    out = np.zeros_like(mask)
-    if crop is not None and by > 0:  # a square's maximum filter is separable: O(pixels), whatever ``by``
-        out[crop] = scipy.ndimage.maximum_filter(mask[crop].view(np.uint8), size=2 * by + 1, mode="constant") > 0
-    elif crop is not None:
-        out[crop] = mask[crop]
-    return out
-
-
-def _boxes(mask: np.ndarray, margin: int) -> list[Box]:
-    """Bounding boxes of the connected groups of ``mask`` grown by at least ``margin`` pixels;
-    boxes that overlap are merged.
-
-    Computed on blocks of b = margin // 8 pixels (b = 1 for small margins): a block is set
-    where any of its pixels is, the blocks are grown by ceil(margin / b) and grouped, and each
-    group's box is taken back to pixels. Every pixel within ``margin`` of a set pixel lies in
-    a box (the boxes exceed the exact ones by less than 2 b on each side), at 1 / b^2 of the
-    cost: the dilation of a large mask by a margin of 6 lc otherwise costs about as much as a
-    multigrid iteration of the correction."""
-    crop = _bounding_box(mask, margin)
-    if crop is None:
-        return []
-    block = max(1, margin // 8)
-    sub = mask[crop]
-    if block > 1:
-        ny, nx = -(-sub.shape[0] // block), -(-sub.shape[1] // block)
-        padded = np.zeros((ny * block, nx * block), bool)
-        padded[:sub.shape[0], :sub.shape[1]] = sub
-        sub = padded.reshape(ny, block, nx, block).any(axis=(1, 3))
-    grown = dilated(sub, -(-margin // block))
-    labels, _ = scipy.ndimage.label(grown, structure=np.ones((3, 3), int))
-    shape = mask.shape
-    boxes = [tuple(slice(min(c.start + s.start * block, n), min(c.start + s.stop * block, c.stop, n))
-                   for s, c, n in zip(b, crop, shape, strict=True))
-             for b in scipy.ndimage.find_objects(labels) if b is not None]
-    merged = True
-    while merged and len(boxes) > 1:
-        merged = False
-        for i in range(len(boxes)):
-            for j in range(i + 1, len(boxes)):
-                a, b = boxes[i], boxes[j]
-                if all(s.start < t.stop and t.start < s.stop for s, t in zip(a, b, strict=True)):
-                    boxes[i] = tuple(slice(min(s.start, t.start), max(s.stop, t.stop)) for s, t in zip(a, b, strict=True))
-                    del boxes[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return boxes
 
 
 class VerifiedInference:
@@ -376,10 +114,10 @@ class VerifiedInference:
     #: image instead (its fast transform is exact there; the boxes would cost about as much)
     GLOBAL_FRACTION = 0.5
 
-    def __init__(self, inference, equation: PixelEquation, tolerance: float = _DEFAULTS["tolerance"],
-                 margin_lc: float = _DEFAULTS["margin_lc"], max_rounds: int = _DEFAULTS["max_rounds"],
-                 solve_fraction: float = _DEFAULTS["solve_fraction"], warm_start: str = _DEFAULTS["warm_start"],
-                 history_cap: float | None = None, cap_history: bool = _DEFAULTS["cap_history"]):
+    def __init__(self, inference, equation: PixelEquation, tolerance: float = VERIFICATION_DEFAULTS["tolerance"],
+                 margin_lc: float = VERIFICATION_DEFAULTS["margin_lc"], max_rounds: int = VERIFICATION_DEFAULTS["max_rounds"],
+                 solve_fraction: float = VERIFICATION_DEFAULTS["solve_fraction"], warm_start: str = VERIFICATION_DEFAULTS["warm_start"],
+                 history_cap: float | None = None, cap_history: bool = VERIFICATION_DEFAULTS["cap_history"]):
         if warm_start not in WARM_STARTS:
             raise ValueError(f"verification warm_start must be one of {WARM_STARTS}, got {warm_start!r}")
         if warm_start != "previous" and inference is None:
@@ -420,7 +158,7 @@ class VerifiedInference:
         if self.warm_start == "previous":
             self.t_network, self.evaluated_fraction = 0.0, 0.0
             if self.phi is None:  # nothing to continue from: the local solution 2H / (Gc/lc + 2H)
-                return 2.0 * history / (self.equation.reaction0 + 2.0 * history), None
+                return self.equation.local_solution(history), None
             return self.phi.copy(), np.zeros(capped.shape, bool)
         prediction = np.asarray(self.inference(capped), dtype=np.float64)
         self.t_network, self.evaluated_fraction = self.inference.t_network, self.inference.evaluated_fraction
@@ -452,7 +190,7 @@ class VerifiedInference:
             # the residual changes only where H or phi (within one pixel) changed
             stale = changed_phi | (history != self.history)
             residual = self.residual
-            box = _bounding_box(stale, 1)
+            box = bounding_box(stale, 1)
             if box is not None:  # one pass over the changes' bounding box (grown by the stencil)
                 residual[box] = self.equation.residual_on(phi, history, box)
         failing = np.abs(residual) > self.tolerance
@@ -467,7 +205,7 @@ class VerifiedInference:
         for _ in range(self.max_rounds):
             if not failing.any():
                 break
-            boxes = _boxes(failing, margin)
+            boxes = correction_boxes(failing, margin)
             if sum(box_area(box) for box in boxes) > self.GLOBAL_FRACTION * failing.size:
                 boxes = [(slice(0, failing.shape[0]), slice(0, failing.shape[1]))]
             for box in boxes:

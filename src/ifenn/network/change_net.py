@@ -23,7 +23,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from ifenn.network.picnn import SymmetricConv2d, residual
+from ifenn.network.picnn import SymmetricConv2d
+from ifenn.pixel_equation.torch_backend import residual
 
 
 class ChangeNet(nn.Module):

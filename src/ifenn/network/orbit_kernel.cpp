@@ -225,7 +225,7 @@ namespace {
 
 // ---------------------------------------------------------------------------------------------
 // Conjugate gradients preconditioned by one multigrid V-cycle, for the correction of the pixel
-// equation on an n x m box (ifenn/hybrid/verification.py, PixelEquation.solve_box):
+// equation on an n x m box (ifenn/pixel_equation/numpy_backend.py, PixelEquation.solve_box):
 //
 //     A delta = rhs,   (A x)_i = (a_i + 3 D) x_i - D (0.5 sum_edges x_j + 0.25 sum_corners x_j),
 //

@@ -1,4 +1,4 @@
-"""Physics-informed CNN (PICNN) for the phase field: network, pixel physics, exact pixel solver.
+"""Physics-informed CNN (PICNN) for the phase field: the network, its input scaling, and its file.
 
 Conventions:
 
@@ -6,54 +6,28 @@ Conventions:
   (row 0 is the bottom of the domain), column ``ix`` increases with x. Batches of maps have
   shape ``(n_maps, ny_px, nx_px)``; torch tensors used inside the network have shape
   ``(n_maps, 1, ny_px, nx_px)``.
-* Units: N and mm. ``history`` H is in N/mm^2, ``Gc`` in N/mm, ``lc`` and ``h_px`` in mm;
-  the phase field ``phi`` is dimensionless in [0, 1].
-* The pixel phase-field equation, at every pixel,
+* Units: N and mm. ``history`` H is in N/mm^2; the phase field ``phi`` is dimensionless in [0, 1].
 
-      R = (Gc/lc) phi - Gc lc Lap(phi) - 2 (1 - phi) H = 0,
-      Lap(phi) = (K9*(phi) - 3 phi) / h_px^2,
-      K9* = [[1/4, 1/2, 1/4], [1/2, 0, 1/2], [1/4, 1/2, 1/4]],
-
-  with either zero padding of phi outside the image (the authors' released script: phi = 0
-  beyond the boundary) or replicate padding (a zero-flux boundary, as in the FEM).
+The equation the network is trained on, its residual and its exact solve are the pixel
+equation's (:mod:`ifenn.pixel_equation`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 from pathlib import Path
 
 import numpy as np
-import scipy.fft
-import scipy.ndimage
-import scipy.sparse
-import scipy.sparse.linalg
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from ifenn.io import atomic_path, reading
 from ifenn.network.settings import DEFAULT_HISTORY_CAP  # H_cap, N/mm^2: the config schema's, the constructor's default
-from ifenn.pixels import LAPLACIAN_CENTRE_WEIGHT, LAPLACIAN_K9_STAR
+from ifenn.pixel_equation.torch_backend import PADDING_MODES, pad
 
 #: Padding modes understood by the network and the Laplacian. "zeros": values beyond the
 #: image are 0; "replicate": the edge value is repeated (zero flux for the Laplacian).
-PADDING_MODES = ("zeros", "replicate", "reflect", "circular")
-
-
-# ---------------------------------------------------------------------------------------
-# Padding helper
-# ---------------------------------------------------------------------------------------
-def _pad(field: torch.Tensor, radius: int, padding: str) -> torch.Tensor:
-    """Pad the last two dimensions of ``field`` (n, c, ny, nx) by ``radius`` pixels."""
-    if padding not in PADDING_MODES:
-        raise ValueError(f"padding must be one of {PADDING_MODES}, got {padding!r}")
-    if radius == 0:
-        return field
-    mode = "constant" if padding == "zeros" else padding
-    return F.pad(field, (radius, radius, radius, radius), mode=mode)
-
 
 # ---------------------------------------------------------------------------------------
 # Symmetric convolution
@@ -126,7 +100,7 @@ class SymmetricConv2d(nn.Module):
         radius = self.kernel_size // 2
         if self.padding == "zeros":
             return F.conv2d(x, self.kernel(), padding=radius)
-        return F.conv2d(_pad(x, radius, self.padding), self.kernel())
+        return F.conv2d(pad(x, radius, self.padding), self.kernel())
 
 
 # ---------------------------------------------------------------------------------------
@@ -270,198 +244,6 @@ class PICNN(nn.Module):
 
 
 # ---------------------------------------------------------------------------------------
-# Pixel physics
-# ---------------------------------------------------------------------------------------
-def laplacian_9pt(phi: torch.Tensor, h_px: float, padding: str = "zeros", cuts=None) -> torch.Tensor:
-    """Isotropic 9-point Laplacian (K9*(phi) - 3 phi) / h_px^2.
-
-    phi : (n, 1, ny, nx) tensor; h_px : pixel spacing in mm; padding : "zeros" (phi = 0
-    beyond the image, the released script) or "replicate" (zero flux); cuts : the stencil links
-    the scene's slits cut (:class:`ifenn.pixels.SlitCuts` of this image's shape), left out.
-    Returns (n, 1, ny, nx), units 1/mm^2.
-    """
-    stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=phi.dtype, device=phi.device).reshape(1, 1, 3, 3)
-    neighbours = F.conv2d(_pad(phi, 1, padding), stencil) + LAPLACIAN_CENTRE_WEIGHT * phi
-    if cuts:
-        # cuts of one image apply to every image of the batch; stacked cuts (n, ny, nx) to each its own
-        batch = len(cuts.shape) == 3
-        if tuple(phi.shape[-2:]) != tuple(cuts.shape[-2:]) or (batch and phi.shape[0] * phi.shape[1] != cuts.shape[0]):
-            raise ValueError(f"slit cuts of a {cuts.shape} image on a {tuple(phi.shape)} one")
-        flat = phi.reshape(-1) if batch else phi.reshape(*phi.shape[:-2], -1)
-        rows, cols = torch.as_tensor(cuts.rows, device=phi.device), torch.as_tensor(cuts.cols, device=phi.device)
-        weights = torch.as_tensor(cuts.weights, dtype=phi.dtype, device=phi.device)
-        flux = torch.zeros_like(flat).index_add_(-1, rows, weights * (flat[..., cols] - flat[..., rows]))
-        neighbours = neighbours - flux.reshape(phi.shape)
-    return neighbours / h_px**2
-
-
-def residual(
-    phi: torch.Tensor,
-    history: torch.Tensor,
-    Gc: float,
-    lc: float,
-    h_px: float,
-    padding: str = "zeros",
-    cuts=None,
-) -> torch.Tensor:
-    """Pixel residual R = (Gc/lc) phi - Gc lc Lap(phi) - 2 (1 - phi) H, N/mm^2.
-
-    phi, history : (n, 1, ny, nx) tensors (history in N/mm^2, already capped if wanted);
-    cuts : the slits' cut stencil links (:func:`laplacian_9pt`).
-    """
-    return (Gc / lc) * phi - Gc * lc * laplacian_9pt(phi, h_px, padding, cuts) - 2.0 * (1.0 - phi) * history
-
-
-def physics_loss(
-    phi: torch.Tensor,
-    history: torch.Tensor,
-    Gc: float,
-    lc: float,
-    h_px: float,
-    padding: str = "zeros",
-    pixel_weight: torch.Tensor | None = None,
-    cuts=None,
-) -> torch.Tensor:
-    """Loss L = ||R||_2 over all pixels of all images (the paper's eq. for L), N/mm^2.
-
-    ``pixel_weight`` (same shape as phi, optional) multiplies R^2 pixel by pixel before the
-    sum; training on crops uses it to mask the crop margins and to weight samples. ``cuts``: the
-    slits' cut stencil links (:func:`laplacian_9pt`; stacked ones for a batch of crops).
-    """
-    r = residual(phi, history, Gc, lc, h_px, padding, cuts)
-    squared = r**2 if pixel_weight is None else pixel_weight * r**2
-    return torch.sqrt(squared.sum())
-
-
-# ---------------------------------------------------------------------------------------
-# Exact solution of the pixel equation
-# ---------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=16)
-def laplacian_matrix(ny: int, nx: int, padding: str = "zeros") -> scipy.sparse.csc_matrix:
-    """Sparse K9* - 3 I on an (ny, nx) grid, row-major pixel numbering, without 1/h_px^2.
-
-    "zeros": neighbours beyond the image are dropped (phi = 0 there); "replicate": they
-    are folded back onto the nearest edge pixel (zero flux). Cached per shape and padding.
-    """
-    if padding not in ("zeros", "replicate"):
-        raise ValueError("the exact pixel solver supports padding 'zeros' or 'replicate'")
-    iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
-    rows, cols, vals = [], [], []
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            weight = LAPLACIAN_K9_STAR[dy + 1, dx + 1]
-            if weight == 0.0:
-                continue
-            jy, jx = iy + dy, ix + dx
-            if padding == "replicate":
-                jy, jx = np.clip(jy, 0, ny - 1), np.clip(jx, 0, nx - 1)
-                inside = np.ones_like(jy, dtype=bool)
-            else:
-                inside = (jy >= 0) & (jy < ny) & (jx >= 0) & (jx < nx)
-            rows.append((iy * nx + ix)[inside])
-            cols.append((jy * nx + jx)[inside])
-            vals.append(np.full(inside.sum(), weight))
-    n = ny * nx
-    neighbours = scipy.sparse.csc_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
-    )
-    return (neighbours + LAPLACIAN_CENTRE_WEIGHT * scipy.sparse.identity(n, format="csc")).tocsc()
-
-
-@functools.lru_cache(maxsize=16)
-def _laplacian_symbol(ny: int, nx: int, padding: str) -> np.ndarray:
-    """Eigenvalues of K9* - 3 I in the basis of the fast transform of ``_fast_transforms``.
-
-    K9* = (S_x + S_y)/2 + S_x S_y / 4 with S the 1-D sum of the two neighbours; with
-    "replicate" S has the DCT-II eigenvalues 2 cos(pi k / n) (exact for the matrix), with
-    "zeros" the DST-II ones 2 cos(pi (k + 1) / n) (a close preconditioner: DST-II puts the
-    zero half a pixel nearer than the matrix does). Shape (ny, nx).
-    """
-    shift = 1 if padding == "zeros" else 0
-    s_y = 2.0 * np.cos(np.pi * (np.arange(ny) + shift) / ny)[:, None]
-    s_x = 2.0 * np.cos(np.pi * (np.arange(nx) + shift) / nx)[None, :]
-    return 0.5 * (s_x + s_y) + 0.25 * s_x * s_y + LAPLACIAN_CENTRE_WEIGHT
-
-
-def _fast_transforms(padding: str):
-    if padding == "zeros":
-        return (lambda v: scipy.fft.dstn(v, type=2, norm="ortho"), lambda v: scipy.fft.idstn(v, type=2, norm="ortho"))
-    return (lambda v: scipy.fft.dctn(v, type=2, norm="ortho"), lambda v: scipy.fft.idctn(v, type=2, norm="ortho"))
-
-
-def solve_pixel_equation(
-    history: np.ndarray,
-    Gc: float,
-    lc: float,
-    h_px: float,
-    padding: str = "zeros",
-    rtol: float = 1e-10,
-    maxiter: int = 1000,
-    initial_guess: np.ndarray | None = None,
-    cuts=None,
-) -> np.ndarray:
-    """Exact phi of the pixel equation R(phi) = 0 for a history map (no network).
-
-    The equation is linear in phi: A phi = 2H with A = diag(Gc/lc + 2H) - (Gc lc / h_px^2) L
-    and L the cached K9* - 3 I matrix; A is symmetric positive definite. It is solved by
-    conjugate gradients to relative residual ``rtol``, preconditioned with the exact
-    inverse of the constant-coefficient operator min(Gc/lc + 2H) I - (Gc lc / h_px^2) L,
-    applied with a fast cosine (replicate) or sine (zeros) transform: 15-45 iterations for
-    a 400x400 snt1 map (Jacobi needs ~270).
-
-    history : (ny, nx) or (n, ny, nx) array, N/mm^2 (pass it capped if the network is).
-    initial_guess : optional phi of the same shape (e.g. the previous increment's);
-        default: the local solution 2H / (Gc/lc + 2H).
-    cuts : the stencil links the scene's slits cut (:class:`ifenn.pixels.SlitCuts`), left out
-        of L (no flux across a slit, as FEM's doubled nodes); the preconditioner stays the
-        uncut operator's (CG then needs a few more iterations).
-    Returns phi with the shape of ``history`` (float64).
-    """
-    history = np.asarray(history, dtype=np.float64)
-    if history.ndim == 3:
-        guesses = [None] * len(history) if initial_guess is None else list(initial_guess)
-        return np.stack(
-            [solve_pixel_equation(h, Gc, lc, h_px, padding, rtol, maxiter, g, cuts) for h, g in zip(history, guesses, strict=True)]
-        )
-    ny, nx = history.shape
-    h_flat = history.reshape(-1)
-    diffusion = Gc * lc / h_px**2
-    reaction = Gc / lc + 2.0 * h_flat
-    laplacian = laplacian_matrix(ny, nx, padding)
-    if cuts:
-        laplacian = laplacian - cuts.matrix()
-    system = (scipy.sparse.diags(reaction) - diffusion * laplacian).tocsr()
-    rhs = 2.0 * h_flat
-    symbol = reaction.min() - diffusion * _laplacian_symbol(ny, nx, padding)
-    forward, inverse = _fast_transforms(padding)
-    preconditioner = scipy.sparse.linalg.LinearOperator(
-        system.shape, matvec=lambda r: inverse(forward(r.reshape(ny, nx)) / symbol).reshape(-1), dtype=np.float64
-    )
-    start = rhs / reaction if initial_guess is None else np.asarray(initial_guess, dtype=np.float64).reshape(-1)
-    phi, info = scipy.sparse.linalg.cg(system, rhs, x0=start, rtol=rtol, atol=0.0, maxiter=maxiter, M=preconditioner)
-    if info != 0:
-        raise RuntimeError(f"pixel phase-field CG did not converge in {maxiter} iterations")
-    return phi.reshape(ny, nx)
-
-
-# ---------------------------------------------------------------------------------------
-# Gaussian smoothing (IFENN step 3)
-# ---------------------------------------------------------------------------------------
-def gaussian_smoothing(
-    phi: np.ndarray, sigma: float = 2.0, truncate: float = 4.0, mode: str = "reflect"
-) -> np.ndarray:
-    """The released script's Gaussian filter: scipy.ndimage.gaussian_filter of each map.
-
-    phi : (ny, nx) or (n, ny, nx); sigma in pixels (default 2); truncate in sigmas (scipy's
-    default 4, radius 8 pixels for sigma 2); mode : scipy boundary mode (default "reflect",
-    scipy's default). Returns the smoothed maps, same shape.
-    """
-    phi = np.asarray(phi, dtype=np.float64)
-    per_axis_sigma = (0.0,) * (phi.ndim - 2) + (sigma, sigma)
-    return scipy.ndimage.gaussian_filter(phi, per_axis_sigma, truncate=truncate, mode=mode)
-
-
-# ---------------------------------------------------------------------------------------
 # Save / load
 # ---------------------------------------------------------------------------------------
 def save_picnn(
@@ -496,8 +278,13 @@ def save_picnn(
         torch.save(payload, tmp)
 
 
-def load_picnn(path: str | Path, device="cpu") -> tuple[PICNN, dict]:
+def load_picnn(path: str | Path, device="cpu", history_cap: float | None = None) -> tuple[PICNN, dict]:
     """Read a file written by :func:`save_picnn` (saved from the CPU, whatever trained it).
+
+    ``history_cap``: the cap the run puts on the network's input (N/mm^2, in the network's own
+    units), which the model then applies; None keeps the cap it was trained with (the metadata's
+    ``history_cap`` stays that one). The run's spec is the cap's one owner: a run that loads the
+    network for inference passes its own.
 
     Returns (model in eval mode on ``device``, metadata dict with h_px, Gc, lc, config_hash, extra, ...).
     """
@@ -507,7 +294,7 @@ def load_picnn(path: str | Path, device="cpu") -> tuple[PICNN, dict]:
         channels=tuple(payload["channels"]),
         kernel_size=payload["kernel_size"],
         padding=payload["padding"],
-        history_cap=payload["history_cap"],
+        history_cap=payload["history_cap"] if history_cap is None else history_cap,
         input_scaling=InputScaling(**payload["input_scaling"]),
     )
     state = payload["state_dict"]

@@ -1,6 +1,6 @@
 """Training and scoring of the PICNN.
 
-The loss is the pixel residual of the phase-field equation (``ifenn.network.picnn.residual``); no
+The loss is the pixel residual of the phase-field equation (``ifenn.pixel_equation.torch_backend.residual``); no
 labels are used. Three named presets (``PRESETS``):
 
 * ``"released"``: the authors' released script: Adam, lr 1e-3, 5,000 epochs of full images,
@@ -72,7 +72,7 @@ import pandas as pd
 import torch
 
 from ifenn.io import progress_bar
-from ifenn.network.picnn import PICNN, InputScaling, residual
+from ifenn.network.picnn import PICNN, InputScaling
 from ifenn.network.settings import (  # noqa: F401 (re-exported)
     DEFAULT_HISTORY_CAP,
     DEFAULT_SETTINGS,
@@ -80,6 +80,7 @@ from ifenn.network.settings import (  # noqa: F401 (re-exported)
     SAMPLINGS,
     resolve_settings,
 )
+from ifenn.pixel_equation.torch_backend import residual
 from ifenn.pixels import SlitCuts
 
 

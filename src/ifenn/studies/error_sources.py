@@ -7,7 +7,7 @@ single-pass staggering left them), the phase-field step is replaced by each vari
 history H_k:
 
   ``fem``               FEM's own phi_k (the Q1 solve of the phase-field equation with H_k);
-  ``exact_uncapped``    the exact solution of the pixel equation (picnn.solve_pixel_equation,
+  ``exact_uncapped``    the exact solution of the pixel equation (pixel_equation.numpy_backend.solve_pixel_equation,
                         the run's ``pixel_padding``) with H_k uncapped;
   ``exact``             the same with min(H_k, history_cap), the network's input;
   ``network_raw``       the trained PICNN on min(H_k, history_cap), no smoothing;
@@ -173,7 +173,7 @@ class Replay:
     # ----------------------------------------------------------------- variants
     def exact(self, history: np.ndarray) -> np.ndarray:
         """Exact pixel phase field for a history image (pass it capped or not)."""
-        from ifenn.network.picnn import solve_pixel_equation
+        from ifenn.pixel_equation.numpy_backend import solve_pixel_equation
 
         return solve_pixel_equation(history, self.material["Gc"], self.material["lc"], self.h_px, self.spec["pixel_padding"],
                                     maxiter=5000, cuts=self.cuts)

@@ -155,8 +155,9 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
     ``variant`` on the recorded sequence (``exact``: the exact pixel solutions, for the oracles;
     ``change_net``: the trained :class:`ifenn.network.change_net.ChangeNet`). ``verified_phis``: a
     list that receives the verified phi of every step."""
-    from ifenn.hybrid.runs import _network_inference, slit_cuts
-    from ifenn.hybrid.verification import PixelEquation, VerifiedInference
+    from ifenn.hybrid.runs import network_inference, slit_cuts
+    from ifenn.hybrid.verification import VerifiedInference
+    from ifenn.pixel_equation.numpy_backend import PixelEquation
 
     verification = spec["verification"]
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
@@ -169,7 +170,7 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
             run = {**spec, "process_zone": {**spec["process_zone"], "tolerance": verification["network_tolerance"]}}
         else:
             run = {**spec, "inference": "full", "evaluation": "orbit"}
-        network = _network_inference(run, model_path, h_px, start.shape, "cpu")
+        network = network_inference(run, model_path, h_px, start.shape, "cpu")
         step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
     elif variant == "change network":
         from ifenn.network.change_net import ChangeNetWarmStart
@@ -207,7 +208,7 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
 def exact_solutions(spec: dict, h_px: float, images: list) -> list:
     """The exact pixel solution of each image's equation (capped as the step caps it)."""
     from ifenn.hybrid.runs import slit_cuts
-    from ifenn.network.picnn import solve_pixel_equation
+    from ifenn.pixel_equation.numpy_backend import solve_pixel_equation
 
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
     cap = spec["history_cap"] if spec["verification"].get("cap_history", False) else np.inf

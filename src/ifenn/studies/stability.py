@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ifenn import run_files
+from ifenn import materials, run_files
 from ifenn.config import fem_run_spec, ifenn_run_spec
 from ifenn.errors import SolverDivergedError
 
@@ -44,16 +44,12 @@ def cell_name(method: str, lc_over_h: float, step: float, variant: str = "base")
     return name if method == "fem" or variant == "base" else f"{name}_{variant}"
 
 
-def _scene_lc_over_h(config: dict, scene: dict) -> float:
-    return config["material"]["lc"] / ((scene["domain"]["x"][1] - scene["domain"]["x"][0]) / scene["elements"][0])
-
-
 def cells(config: dict) -> dict:
     """Every cell of the sweep: name -> {'method', 'lc_over_h', 'step', 'variant', 'spec',
     'fem_cell' (IFENN: the FEM cell it continues)}."""
     sweep = config["stability"]
     scene = config["scenes"][sweep["scene"]]
-    base_lch = round(_scene_lc_over_h(config, scene), 6)
+    base_lch = round(materials.lc_over_h(config["material"], scene), 6)
     points = {(base_lch, s) for s in sweep["steps"]} | {(float(L), sweep["step"]) for L in sweep["lc_over_h"]}
     out = {}
     for lch, step in sorted(points):
@@ -73,7 +69,7 @@ def _cell_spec(config: dict, name: str, scene: dict, lc_over_h: float, step: flo
     sweep = config["stability"]
     cfg = copy.deepcopy(config)
     width, height = (scene["domain"]["x"][1] - scene["domain"]["x"][0]), (scene["domain"]["y"][1] - scene["domain"]["y"][0])
-    h = config["material"]["lc"] / lc_over_h
+    h = materials.scene_material(config["material"], scene)["lc"] / lc_over_h   # the scene's own lc, kept
     cfg["scenes"] = {"cell": {**scene, "elements": [int(round(width / h)), int(round(height / h))]}}
     cfg["schedules"] = {"cell": [{"increments": int(round(sweep["u_end"] / step)), "step": step}]}
     cfg["fem_runs"] = {"cell": {"scene": "cell", "schedule": "cell"}}
@@ -141,7 +137,7 @@ def cell_metrics(cell_dir: str | Path, reference_dir: str | Path) -> dict:
 def table_rows(config: dict) -> list[dict]:
     """One row per panel entry: (panel, value, method) -> the cell and its reference."""
     sweep = config["stability"]
-    base_lch = round(_scene_lc_over_h(config, config["scenes"][sweep["scene"]]), 6)
+    base_lch = round(materials.lc_over_h(config["material"], config["scenes"][sweep["scene"]]), 6)
     finest_step, finest_lch = min(sweep["steps"]), max(float(v) for v in sweep["lc_over_h"])
     rows = []
     for step in sweep["steps"]:

@@ -113,9 +113,8 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
     share of pixels with |r| above the verification tolerance. With ``ifenn_history`` (the
     whole-path run's), its verified step's record at that increment is added. ``device``: where the
     network runs (:mod:`ifenn.device`)."""
-    from ifenn.hybrid.runs import _network_inference, slit_cuts
-    from ifenn.hybrid.verification import PixelEquation
-    from ifenn.network.picnn import solve_pixel_equation
+    from ifenn.hybrid.runs import network_inference, slit_cuts
+    from ifenn.pixel_equation.numpy_backend import PixelEquation, solve_pixel_equation
 
     network_spec = {**spec, "inference": "full", "smoothing_sigma": None}
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
@@ -128,7 +127,7 @@ def network_before_nucleation(spec: dict, fem_fields: str | Path, model_path: st
               for s in run_files.read_states(fem_fields, before + later, keys=run_files.MAP_KEYS)}
     cuts = slit_cuts(spec)
     equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], cuts)
-    network = _network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape, device)
+    network = network_inference(network_spec, model_path, h_px, next(iter(states.values()))[1].shape, device)
     rows = []
     for k, (u, history, phi_fem) in states.items():
         capped = np.clip(history, 0.0, spec["history_cap"])
