@@ -30,8 +30,8 @@ from _cli import run_fem_spec
 
 from ifenn.config import REPO, fem_run_spec, load_config, validate_config
 from ifenn.fem.mesh import build_mesh, write_mesh
-from ifenn.studies.metrics import peak
-from ifenn.studies.specimens import specimen_table
+from ifenn.studies.tables.metrics import peak
+from ifenn.studies.tables.specimens import specimen_table
 
 RUN = "three-point-bending"
 

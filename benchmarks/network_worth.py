@@ -1,4 +1,4 @@
-"""What a network is worth to the verified step (ifenn.studies.network_worth): the
+"""What a network is worth to the verified step (ifenn.studies.drivers.network_worth): the
 correction's CG iterations and the step's time per warm start (no network, the paper's network,
 extrapolation, and the two oracles that bound any network of that role), on the history images of
 each run's own verified loop. Needs the FEM runs, meshes and trained PICNN of the workflow
@@ -17,8 +17,8 @@ import pandas as pd
 from _cli import parser, run_inputs, setup
 
 from ifenn.io import atomic_path
-from ifenn.studies.network_worth import network_worth
-from ifenn.studies.plots import network_worth_figure
+from ifenn.studies.drivers.network_worth import network_worth
+from ifenn.studies.figures import network_worth_figure
 
 
 def main() -> int:

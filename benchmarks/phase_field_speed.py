@@ -1,6 +1,6 @@
 """The phase-field step, FEM against IFENN with full-image, process-zone and verified inference,
 on snt1/snt2/snt3 (config 'phase_field_benchmark'): same process, same core, same loads from
-each FEM run's switch-over state (see ifenn.studies.benchmark). Needs the FEM runs and the trained
+each FEM run's switch-over state (see ifenn.studies.drivers.benchmark). Needs the FEM runs and the trained
 PICNN of the workflow (results/). Run it alone: the numbers are wall times.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/phase_field_speed.py [--increments N] [--out CSV]
@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 from _cli import devices, parser, run_inputs, setup
 
-from ifenn.studies.benchmark import phase_field_speed
+from ifenn.studies.drivers.benchmark import phase_field_speed
 
 
 def main() -> int:

@@ -1,6 +1,6 @@
 """The phase-field step over the whole run, FEM against whole-path IFENN (the verified step from
 the first increment), snt1/snt2/snt3 (config 'whole_run_benchmark'): one process, one core, the
-two runs' increments interleaved (see ifenn.studies.whole_run_benchmark). Needs the meshes and the trained
+two runs' increments interleaved (see ifenn.studies.drivers.whole_run_benchmark). Needs the meshes and the trained
 PICNN of the workflow (results/), no FEM run. Run it alone: the numbers are wall times.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/whole_run_speed.py [--increments N] [--out CSV]
@@ -12,7 +12,7 @@ import pandas as pd
 from _cli import devices, parser, run_inputs, setup
 
 from ifenn.io import write_csv
-from ifenn.studies.whole_run_benchmark import whole_run_speed
+from ifenn.studies.drivers.whole_run_benchmark import whole_run_speed
 
 
 def main() -> int:

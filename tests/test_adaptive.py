@@ -12,7 +12,7 @@ from conftest import assert_uniaxial_plane_strain
 
 from ifenn import run_files
 from ifenn.adaptive.quadtree import FineSlit, build_quadtree, coarsest_levels, leaf_levels
-from ifenn.studies.metrics import post_peak_rms
+from ifenn.studies.tables.metrics import post_peak_rms
 
 MATERIAL = {"lame_lambda": 121154.0, "lame_mu": 80770.0, "Gc": 2.7, "lc": 0.03, "residual_stiffness": 0.0, "history_notch_B": 1e3}
 DIRECT = {"ksp_type": "preonly", "pc_type": "lu"}
@@ -352,7 +352,7 @@ def test_adaptive_steps_and_converged_staggering_on_the_adaptive_mesh(quick_conf
     from ifenn.adaptive.run import run_adaptive
     from ifenn.config import fem_run_spec
     from ifenn.fem.loading import largest_change
-    from ifenn.studies.metrics import force_curve_error, work_rel_error
+    from ifenn.studies.tables.metrics import force_curve_error, work_rel_error
 
     spec = {**fem_run_spec(quick_config, "snt1-A-conv"), "name": "snt1-A-conv-adaptive", "adaptive_mesh": {"levels": 3},
             "checkpoint_every": 4, "save_every": 1}
@@ -481,8 +481,8 @@ def test_adaptive_finer_reference_is_nearer_the_next_uniform_mesh(adaptive_and_f
     # the table and figure of adaptive_resolution with an adaptive finer reference (the paper
     # config's default): its dofs are drawn against the finer uniform mesh's too
     from ifenn.run_files import write_spec
-    from ifenn.studies.adaptive_resolution import adaptive_resolution_curves, adaptive_resolution_table, uniform_dofs
-    from ifenn.studies.plots import adaptive_resolution_figure
+    from ifenn.studies.figures import adaptive_resolution_figure
+    from ifenn.studies.tables.adaptive_resolution import adaptive_resolution_curves, adaptive_resolution_table, uniform_dofs
 
     for folder, run_spec in ((reference_dir, spec), (quarter_tmp / "fem", quarter_spec), (adaptive_dir, adaptive_spec)):
         write_spec(folder / "spec.json", run_spec)
@@ -497,7 +497,7 @@ def test_the_resolution_table_reports_u_at_the_peak_and_the_work_of_the_load():
     """Against a finer curve: a run 1 % stronger throughout is 1 % off in peak and work and 0 in u
     at the peak; a run whose curve comes 3 % later is 3 % off in u at the peak (beyond the 2 %
     target) and, its drop later, does more work."""
-    from ifenn.studies.adaptive_resolution import resolution_rows
+    from ifenn.studies.tables.adaptive_resolution import resolution_rows
 
     u = np.linspace(0.0, 2.0, 201)
     fine = pd.DataFrame({"u": u, "reaction_force": np.minimum(u, 2.0 - u).clip(0)})

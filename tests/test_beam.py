@@ -76,8 +76,8 @@ def test_the_half_beam_doubled_is_the_whole_beam(beams):
 def test_the_specimen_table_against_a_published_curve(beams, paper_config):
     """The table of a specimen: the work of the load is the area under a curve (exact for a
     triangle), the half's force doubled by its scene's symmetry_factor, ratios against the curve."""
-    from ifenn.studies.metrics import work_of_load
-    from ifenn.studies.specimens import specimen_table, symmetry_factor
+    from ifenn.studies.tables.metrics import work_of_load
+    from ifenn.studies.tables.specimens import specimen_table, symmetry_factor
 
     u = np.linspace(0.0, 2.0, 21)
     triangle = np.minimum(u, 2.0 - u)  # peak 1 at u = 1, area 1

@@ -137,7 +137,7 @@ def test_summary_renders_this_runs_tables(tmp_path):
     """results/summary.md quotes the tables it is given, value for value, with the machine and date."""
     import json
 
-    from ifenn.studies.summary import render_summary
+    from ifenn.studies.tables.summary import render_summary
 
     results = tmp_path / "results"
     (results / "tables").mkdir(parents=True)

@@ -1,4 +1,4 @@
-"""The error split of IFENN replayed on FEM states (ifenn.studies.error_sources), on the quick snt1 scene:
+"""The error split of IFENN replayed on FEM states (ifenn.studies.drivers.error_sources), on the quick snt1 scene:
 the exact variant solves the pixel equation, switching a source off makes its contribution
 vanish, and the parts add up to the published step's error."""
 
@@ -15,7 +15,14 @@ from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.fem.solver import run_fem
 from ifenn.network.picnn import PICNN, save_picnn
 from ifenn.pixel_equation.torch_backend import residual
-from ifenn.studies.error_sources import PUBLISHED_PARTS, Replay, crack_band_min, error_sources, postswitch_error, saved_states
+from ifenn.studies.drivers.error_sources import (
+    PUBLISHED_PARTS,
+    Replay,
+    crack_band_min,
+    error_sources,
+    postswitch_error,
+    saved_states,
+)
 
 
 @pytest.fixture(scope="module")

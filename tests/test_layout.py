@@ -35,6 +35,24 @@ def _problems(root: Path) -> list[str]:
     return problems
 
 
+STENCIL = {"LAPLACIAN_K9_STAR", "LAPLACIAN_CENTRE_WEIGHT", "STENCIL_LINKS"}
+
+
+def _stencil_users(root: Path) -> list[str]:
+    """The modules that import the pixel equation's stencil: the pixel equation's own only (ifenn.pixels
+    defines it, with the slits' cut links)."""
+    users = []
+    for path in sorted(root.rglob("*.py")):
+        here = "ifenn." + ".".join(path.relative_to(root).with_suffix("").parts)
+        if any(STENCIL & set(names) for _, names in _imports(path)) and not here.startswith("ifenn.pixel_equation."):
+            users.append(here)
+    return users
+
+
+def test_the_pixel_equation_is_written_in_one_package():
+    assert _stencil_users(PACKAGE) == []
+
+
 def test_no_private_name_crosses_a_package_and_fem_does_not_import_the_config():
     assert _problems(PACKAGE) == []
 
@@ -46,3 +64,6 @@ def test_the_layout_check_can_fail(tmp_path):
     (tmp_path / "studies" / "table.py").write_text("from ifenn.hybrid.runs import _hidden\n")
     assert _problems(tmp_path) == ["ifenn.fem.solver imports ifenn.config: the solver must not climb back to the config",
                                    "ifenn.studies.table imports private ifenn.hybrid.runs._hidden"]
+    (tmp_path / "hybrid").mkdir()
+    (tmp_path / "hybrid" / "step.py").write_text("from ifenn.pixels import LAPLACIAN_K9_STAR\n")
+    assert _stencil_users(tmp_path) == ["ifenn.hybrid.step"]

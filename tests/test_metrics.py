@@ -4,7 +4,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ifenn.studies.metrics import crack_iou, dissipated_energy, force_curve_error, post_peak_rms, timing
+from ifenn.studies.tables.metrics import crack_iou, dissipated_energy, force_curve_error, post_peak_rms, timing
 
 
 @pytest.mark.parametrize("lc_over_h_px", [6, 12])
@@ -59,7 +59,7 @@ def test_crack_ridge_phi_is_the_weakest_section_of_the_band():
     """A straight band from a notch tip to the right edge with phi = 0.999 on its centre line
     but 0.9 in one column: the weakest section is 0.9; a band that stops short connects nothing
     beyond the far field's phi."""
-    from ifenn.studies.metrics import crack_ridge_phi
+    from ifenn.studies.tables.metrics import crack_ridge_phi
 
     ny, nx = 60, 80
     rows = np.arange(ny)[:, None]
@@ -80,7 +80,7 @@ def test_crack_ridge_phi_is_the_weakest_section_of_the_band():
 
 
 def test_post_switch_error_counts_only_hybrid_increments():
-    from ifenn.studies.metrics import post_switch_force_error
+    from ifenn.studies.tables.metrics import post_switch_force_error
 
     u = np.linspace(0, 1, 11)
     fem = pd.DataFrame({"u": u, "reaction_force": 10 * np.minimum(u, 1 - u) * 2})
@@ -109,7 +109,7 @@ def test_half_drop_and_work_of_the_load_on_a_known_curve():
     """A triangle rising to 1 at u = 1 and falling to 0 at u = 2: the force is half the peak again
     at u = 1.5, the work to the end is 1; a curve whose drop comes later has a later half drop and
     more work, one cut short at its peak has none (NaN)."""
-    from ifenn.studies.metrics import u_at_half_drop, work_of_load
+    from ifenn.studies.tables.metrics import u_at_half_drop, work_of_load
 
     u = np.linspace(0.0, 2.0, 41)
     force = np.minimum(u, 2.0 - u)

@@ -1,4 +1,4 @@
-"""What a network is worth to the verified step (ifenn.studies.network_worth), on the quick snt1-I
+"""What a network is worth to the verified step (ifenn.studies.drivers.network_worth), on the quick snt1-I
 scene: every warm start replayed on the loop's own history images ends with the same certificate,
 and the oracle that knows the exact solution leaves the correction nothing to do."""
 
@@ -9,7 +9,7 @@ from conftest import quick_fem_run
 
 from ifenn.config import ifenn_run_spec
 from ifenn.network.picnn import PICNN, InputScaling, save_picnn
-from ifenn.studies.network_worth import VARIANTS, network_worth
+from ifenn.studies.drivers.network_worth import VARIANTS, network_worth
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def test_the_oracle_leaves_nothing_to_correct(worth):
 
 
 def test_the_figure_shows_every_run(worth, tmp_path):
-    from ifenn.studies.plots import network_worth_figure
+    from ifenn.studies.figures import network_worth_figure
 
     _, summary, _ = worth
     network_worth_figure(summary, tmp_path / "worth.png")

@@ -293,4 +293,4 @@ def test_torch_comes_before_dolfinx_and_only_where_needed():
     assert loaded.index("torch") < loaded.index("dolfinx")
     loaded = modules("import ifenn.config; from petsc4py import PETSc")
     assert loaded.index("torch") < loaded.index("petsc4py")
-    assert "torch" not in modules("import ifenn.studies.plots, ifenn.run_files, ifenn.config")
+    assert "torch" not in modules("import ifenn.studies.figures, ifenn.run_files, ifenn.config")

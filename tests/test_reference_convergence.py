@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from ifenn.config import validate_config
-from ifenn.studies.reference_convergence import reference_convergence_rows
+from ifenn.studies.tables.reference_convergence import reference_convergence_rows
 
 
 def _history(u, force):

@@ -117,7 +117,7 @@ def test_a_second_writer_refuses_at_once_naming_the_holder(quick_spec, tmp_path)
 def test_stage_times_sum_the_benchmark_files_and_bound_the_wall(tmp_path):
     """stage-times: per stage the jobs, their summed and longest wall time; the bound on N cores is
     the summed wall over N or the longest job, whichever is larger."""
-    from ifenn.studies.stage_times import job_times, stage_times, wall_bound
+    from ifenn.tooling.stage_times import job_times, stage_times, wall_bound
 
     for stage, job, seconds in (("fem", "a", 100.0), ("fem", "b", 300.0), ("ifenn", "c", 50.0)):
         (tmp_path / "benchmarks" / stage).mkdir(parents=True, exist_ok=True)
@@ -134,7 +134,7 @@ def test_the_cpu_column_misses_at_most_the_time_since_the_last_sample():
     """Snakemake samples a job's CPU every 0.5 s for 15 s, then every 30 s, and keeps the last
     sample: a 10-s job misses at most 0.5 s, a 20-s job the 5 s since its 15-s sample, a long one
     a whole 30-s interval."""
-    from ifenn.studies.stage_times import cpu_unsampled_bound
+    from ifenn.tooling.stage_times import cpu_unsampled_bound
 
     assert cpu_unsampled_bound([0.2]) == 0.2 and cpu_unsampled_bound([10.0]) == 0.5
     assert cpu_unsampled_bound([20.0]) == 5.0 and cpu_unsampled_bound([1000.0]) == 30.0
@@ -146,7 +146,7 @@ def test_stage_times_name_the_machine_the_dag_ran_on(tmp_path):
     stage-times quotes it beside the reference machine's, and says when a DAG has none."""
     import json
 
-    from ifenn.studies.stage_times import MACHINE_SPEED, machine_speed_line
+    from ifenn.tooling.stage_times import MACHINE_SPEED, machine_speed_line
 
     assert machine_speed_line(tmp_path) is None
     (tmp_path / MACHINE_SPEED).parent.mkdir(parents=True)
@@ -159,7 +159,7 @@ def test_stage_times_name_the_machine_the_dag_ran_on(tmp_path):
 def test_the_longest_chain_of_jobs_that_wait_for_each_other():
     """critical_path: a job waits for the jobs that write its inputs; the chain with the largest
     summed wall time bounds the workflow on any number of cores, and the bound says so."""
-    from ifenn.studies.stage_times import critical_path, parse_dry_run, wall_bound
+    from ifenn.tooling.stage_times import critical_path, parse_dry_run, wall_bound
 
     dry = """
 rule mesh:
@@ -198,7 +198,7 @@ localrule all:
 def test_stage_times_name_the_stale_and_the_missing_files(tmp_path):
     """Against the DAG's own list: files no job writes are stale (left out of the sums, by
     ``keep``), the DAG's files not written yet are missing (a run not finished)."""
-    from ifenn.studies.stage_times import stage_times, unmatched
+    from ifenn.tooling.stage_times import stage_times, unmatched
 
     for job, seconds in (("fem/a", 100.0), ("fem/old", 900.0)):
         (tmp_path / "benchmarks" / job).parent.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,7 @@ import pytest
 
 from ifenn.errors import NonFiniteResultError, SolverDivergedError
 from ifenn.run_files import FIELDS, write_fields
-from ifenn.studies.stability import cell_metrics, cells, classify, table_rows
+from ifenn.studies.drivers.stability import cell_metrics, cells, classify, table_rows
 
 THRESHOLDS = {"iou_min": 0.5, "final_force_max": 0.5, "peak_error_max": 0.05}
 
@@ -88,7 +88,7 @@ def test_only_the_solvers_own_failure_is_labelled_diverged(quick_config, tmp_pat
     """A cell says 'diverged' for the solver's own exception only; a foreign RuntimeError (a CUDA
     out-of-memory) or any other error fails the job with its message instead of a label."""
     import ifenn.fem.solver
-    from ifenn.studies.stability import run_cell
+    from ifenn.studies.drivers.stability import run_cell
 
     def failing(*args, **kwargs):
         raise error

@@ -146,7 +146,7 @@ def test_reactions_of_a_simply_supported_beam_on_the_adaptive_mesh():
 
 def test_the_scene_picture_draws_parts_and_points(tmp_path):
     from ifenn.fem.mesh import build_mesh
-    from ifenn.studies.plots import mesh_figure
+    from ifenn.studies.figures import mesh_figure
 
     mesh_figure(build_mesh(BEAM), BEAM, "beam", tmp_path / "beam.png")
     assert (tmp_path / "beam.png").stat().st_size > 10_000

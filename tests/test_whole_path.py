@@ -15,7 +15,7 @@ from ifenn.fem.mesh import build_mesh, write_mesh
 from ifenn.fem.solver import run_fem
 from ifenn.hybrid.runs import run_ifenn
 from ifenn.pixels import PixelGrid
-from ifenn.studies.whole_path import whole_path_comparison
+from ifenn.studies.drivers.whole_path import whole_path_comparison
 
 #: whole-path verified IFENN against FEM on the quick snt1-II: peak force (measured 0.04 % with the
 #: quick network, 0.04 % with an untrained one: the check certifies the same pixel solution), u at
@@ -76,7 +76,7 @@ def test_paired_whole_run_equals_the_runs_alone(fem_run, quick_config, tmp_path)
     the runs' own; each run's wall time counts only its own increments."""
     import torch
 
-    from ifenn.studies.whole_run_benchmark import paired_whole_run, whole_run_speed
+    from ifenn.studies.drivers.whole_run_benchmark import paired_whole_run, whole_run_speed
 
     spec, tmp, fem = fem_run
     whole_spec = ifenn_run_spec(quick_config, "snt1-II-whole")

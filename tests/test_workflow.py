@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from ifenn.studies.stage_times import parse_dry_run
+from ifenn.tooling.stage_times import parse_dry_run
 
 REPO = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "-s", str(REPO / "Snakefile")]
@@ -117,7 +117,7 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     """Process-zone IFENN tracks full-image IFENN (force curve within 0.5 %) on every run of
     the quick profile; the speed/accuracy table, the stability CSV and the phase-field
     benchmark have a row for what the config names."""
-    from ifenn.studies.metrics import force_curve_error
+    from ifenn.studies.tables.metrics import force_curve_error
 
     results = quick_workflow / "results"
     for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):
@@ -154,7 +154,7 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     final = speed.pivot(index="run", columns="method", values="final_force")
     assert ((final.ifenn_full - final.ifenn_full_convolution).abs() < 1e-3 * final.fem).all()
     # what a network is worth to the verified step: every warm start to the same certificate, the oracle corrects nothing
-    from ifenn.studies.network_worth import VARIANTS
+    from ifenn.studies.drivers.network_worth import VARIANTS
 
     worth = pd.read_csv(results / "benchmarks" / "network_worth.csv")
     assert set(worth.variant) == set(VARIANTS) and worth.run.nunique() == 3 and (worth.max_certificate <= 1e-3).all()
@@ -165,7 +165,7 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
 def test_quick_profile_error_sources(quick_workflow):
     """The error split has every source of every configured run; its parts add up to the
     published step; replaying the published step on FEM's states lands near the whole run's error."""
-    from ifenn.studies.error_sources import PUBLISHED_PARTS, SOURCES
+    from ifenn.studies.drivers.error_sources import PUBLISHED_PARTS, SOURCES
 
     results = quick_workflow / "results"
     sources = pd.read_csv(results / "tables" / "error_sources.csv")
@@ -235,7 +235,7 @@ def test_lint_and_slurm_profile_dry_run(tmp_path):
 def test_stage_times_count_only_the_current_dag(quick_workflow):
     """stage-times sums the benchmark files of the jobs `all` has today: a file an older workflow
     left (a run since dropped) is named and left out, every job of the DAG is counted."""
-    from ifenn.studies.stage_times import dag_benchmarks, stage_times
+    from ifenn.tooling.stage_times import dag_benchmarks, stage_times
 
     stale = quick_workflow / "benchmarks" / "fem" / "a-run-since-dropped.tsv"
     stale.write_text("s\tcpu_time\n9999.0\t9999.0\n")
@@ -290,7 +290,7 @@ def test_quick_profile_verified_runs_track_fem(quick_workflow):
     """Verified IFENN on the seven quick runs: every hybrid increment certified (max |r| within
     the tolerance), and after the switch-over the force tracks FEM within 1 % of its peak (RMS),
     where the published step is off by several percent on most runs."""
-    from ifenn.studies.metrics import post_switch_force_error
+    from ifenn.studies.tables.metrics import post_switch_force_error
 
     results = quick_workflow / "results"
     for run in ("snt1-I", "snt1-II", "snt1-III", "snt2-II", "snt3-II", "sdnt", "adnt"):

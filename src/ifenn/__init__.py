@@ -4,12 +4,15 @@ Layout, one room per concern:
 
 - top level: ``config`` (validated configuration, run specs), ``io`` (atomic files, logs,
   progress), ``run_files`` (the formats of a run directory), ``pixels`` (the Gauss-point pixel
-  grid the three layers below share);
-- ``fem``: the finite-element core (mesh, forms, problem, FEM phase-field step, load control,
+  grid the layers below share), ``materials`` (a scene's material, lc/h), ``geometry``;
+- ``models``: the phase-field model (degradation, crack density, driving force, forms);
+- ``pixel_equation``: the pixel equation (definition, numpy and torch backends);
+- ``fem``: the finite-element core (mesh, elasticity, problem, FEM phase-field step, load control,
   staggered loop);
 - ``network``: the PICNN, its compiled evaluation and its training;
 - ``hybrid``: IFENN's phase-field step, process-zone inference, the verified step, hybrid runs;
-- ``studies``: metrics, figures, benchmarks, the stability sweep and the error split.
+- ``adaptive``: the displacement mesh that follows the crack;
+- ``studies``: drivers, tables and figures; ``tooling``: the workflow's own bookkeeping.
 
 Modules that need dolfinx import it themselves, so the config, pixels and PICNN parts work
 without it.

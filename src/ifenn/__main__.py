@@ -76,49 +76,9 @@ def main(argv=None) -> int:
     times.add_argument("--top", type=int, default=0, help="also list the N longest jobs")
     args = parser.parse_args(argv)
     if args.command == "stage-times":
-        from ifenn.studies.stage_times import (
-            MACHINE_SPEED,
-            cpu_sampling_line,
-            critical_path,
-            dag_jobs,
-            job_times,
-            machine_speed_line,
-            stage_times,
-            unmatched,
-            wall_bound,
-        )
+        from ifenn.tooling.stage_times import report
 
-        def some(paths):
-            return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
-
-        keep, dag = None, None
-        if not args.every_file:
-            dag = dag_jobs(args.workdir, args.snakefile, args.configfile)
-            keep = {job["benchmark"] for job in dag if job["benchmark"]}
-            stale, missing = unmatched(args.workdir, keep)
-            if stale:
-                print(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({some(stale)})\n")
-            if missing:
-                print(f"not run yet: {len(missing)} of the DAG's {len(keep)} jobs have no benchmark file ({some(missing)}); "
-                      "the sums below count less than `snakemake all` spends\n")
-        table = stage_times(args.workdir, keep)
-        print(table.to_markdown(index=False))
-        jobs = job_times(args.workdir, keep)
-        print("\n" + cpu_sampling_line(jobs.wall_s))
-        machine = machine_speed_line(args.workdir)
-        print(machine or f"the machine: not measured ({MACHINE_SPEED} is written by the workflow's first job)")
-        chain_s, chain = 0.0, []
-        if dag is not None:
-            wall = {f"benchmarks/{job}.tsv": seconds for job, seconds in zip(jobs.job, jobs.wall_s, strict=True)}
-            chain_s, chain = critical_path(dag, wall)
-        print(f"\non {args.cores} cores: at least {wall_bound(table, args.cores, chain_s) / 60:.1f} min "
-              "(summed wall / cores, the longest job, or the longest chain of jobs that wait for each other)")
-        if chain:
-            steps = [f"{path.removeprefix('benchmarks/').removesuffix('.tsv')} {wall.get(path, 0.0):.0f} s"
-                     for path in chain if wall.get(path, 0.0) >= 1.0]
-            print(f"the longest chain: {chain_s / 60:.1f} min: " + " -> ".join(steps))
-        if args.top:
-            print(f"\nthe {min(args.top, len(jobs))} longest jobs:\n" + jobs.head(args.top)[["job", "wall_s", "cpu_s"]].round(1).to_markdown(index=False))
+        print(report(args.workdir, args.snakefile, args.configfile, args.cores, args.every_file, args.top))
         return 0
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     for noisy in ("ffcx", "UFL", "root", "compilers"):
@@ -149,7 +109,7 @@ def main(argv=None) -> int:
         run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device, start_dir=args.start_dir)
     elif args.command == "pair":
         from ifenn.io import write_csv
-        from ifenn.studies.whole_run_benchmark import paired_whole_run
+        from ifenn.studies.drivers.whole_run_benchmark import paired_whole_run
 
         specs = []
         for path in (args.fem_spec, args.ifenn_spec):
@@ -160,7 +120,7 @@ def main(argv=None) -> int:
         write_csv(args.table, summary)
         write_csv(args.increments_table, increments)
     elif args.command == "cell":
-        from ifenn.studies.stability import run_cell
+        from ifenn.studies.drivers.stability import run_cell
 
         with open(args.spec) as stream:
             spec = json.load(stream)

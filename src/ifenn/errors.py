@@ -1,7 +1,7 @@
 """The solvers' own failures, apart from every other error.
 
 A stability sweep labels a cell "diverged" only when one of these is raised
-(:mod:`ifenn.studies.stability`); any other error (a CUDA out-of-memory, a bug, a bad file)
+(:mod:`ifenn.studies.drivers.stability`); any other error (a CUDA out-of-memory, a bug, a bad file)
 stops the job with its message, so a broken machine is never read as a physical result.
 """
 

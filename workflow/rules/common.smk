@@ -9,10 +9,10 @@ from snakemake.settings.types import DeploymentMethod
 from ifenn.config import (ConfigError, adaptive_run_spec, adaptive_shared_prefix, fem_run_spec, finer_reference_dir, finer_reference_runs, ifenn_run_spec,
                           paired_runs, schedule_increments, shared_prefix, speed_accuracy_setups, switch_over, training_spec,
                           validate_config)
-from ifenn.studies import stability as _stability
-from ifenn.studies.metrics import process_zone_pairs
+from ifenn.studies.drivers import stability as _stability
+from ifenn.studies.tables.metrics import process_zone_pairs
 from ifenn import materials
-from ifenn.studies.specimens import symmetry_factor
+from ifenn.studies.tables.specimens import symmetry_factor
 
 try:
     # PETSc's type names once, in the main process (a child process reads them: petsc4py would
@@ -289,7 +289,7 @@ def adaptive_resolution_inputs(wildcards):
     return files
 
 
-# The tables results/summary.md renders (ifenn.studies.summary.SECTIONS): those this config produces.
+# The tables results/summary.md renders (ifenn.studies.tables.summary.SECTIONS): those this config produces.
 SUMMARY_TABLES = {
     key: path
     for key, path, produced in [

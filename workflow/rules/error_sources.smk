@@ -1,5 +1,5 @@
 # Where the post-switch error of IFENN comes from: every source replayed on the FEM
-# states saved after the switch-over (config 'error_sources'; ifenn.studies.error_sources).
+# states saved after the switch-over (config 'error_sources'; ifenn.studies.drivers.error_sources).
 
 
 rule error_sources:

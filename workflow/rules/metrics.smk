@@ -203,7 +203,7 @@ rule reference_convergence:
 
 rule summary:
     """results/summary.md: the numbers docs/ quotes, rendered from this run's tables with the machine
-    they ran on and the date (ifenn.studies.summary)."""
+    they ran on and the date (ifenn.studies.tables.summary)."""
     input:
         unpack(lambda w: SUMMARY_TABLES),
         machine="results/benchmarks/machine_speed.json",

@@ -1,5 +1,5 @@
 # Stability where the methods fail: a sweep of FEM and IFENN cells on a small
-# scene (config 'stability'), each classified automatically; see ifenn.studies.stability.
+# scene (config 'stability'), each classified automatically; see ifenn.studies.drivers.stability.
 
 
 rule stability_cell_spec:

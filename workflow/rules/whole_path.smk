@@ -1,7 +1,7 @@
 # IFENN over the whole load path: the whole-path runs (switch_over 'start') against the
 # FEM run of the same scene and schedule, what the network makes of the pre-nucleation damage, and
-# the phase-field step over the whole run, FEM against whole-path IFENN (ifenn.studies.whole_path,
-# ifenn.studies.whole_run_benchmark).
+# the phase-field step over the whole run, FEM against whole-path IFENN (ifenn.studies.drivers.whole_path,
+# ifenn.studies.drivers.whole_run_benchmark).
 
 
 rule whole_path_table:

@@ -1,8 +1,8 @@
-"""Adapter: FEM and IFENN run folders -> ifenn.studies.metrics.accuracy, one row per IFENN run."""
+"""Adapter: FEM and IFENN run folders -> ifenn.studies.tables.metrics.accuracy, one row per IFENN run."""
 import pandas as pd
 
 from ifenn.io import log_to, write_csv
-from ifenn.studies.metrics import accuracy
+from ifenn.studies.tables.metrics import accuracy
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

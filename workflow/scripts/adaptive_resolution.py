@@ -1,4 +1,4 @@
-"""Adapter: FEM at h, the finer FEM and the adaptive runs -> ifenn.studies.adaptive_resolution's table,
+"""Adapter: FEM at h, the finer FEM and the adaptive runs -> ifenn.studies.tables.adaptive_resolution's table,
 the force-curve figure and a picture of each adaptive run's mesh at three load levels."""
 from ifenn.io import log_to
 
@@ -7,13 +7,13 @@ log_to(snakemake.log[0])
 
 from ifenn.io import write_csv  # noqa: E402
 from ifenn.run_files import read_spec  # noqa: E402
-from ifenn.studies.adaptive_resolution import (  # noqa: E402
+from ifenn.studies.figures import adaptive_mesh_figure, adaptive_resolution_figure  # noqa: E402
+from ifenn.studies.tables.adaptive_resolution import (  # noqa: E402
     adaptive_resolution_curves,
     adaptive_resolution_table,
     mesh_states,
     tree_maker,
 )
-from ifenn.studies.plots import adaptive_mesh_figure, adaptive_resolution_figure  # noqa: E402
 
 cases = snakemake.params.cases
 table = adaptive_resolution_table(cases)

@@ -1,8 +1,8 @@
-"""Adapter: one FEM/IFENN pair -> ifenn.studies.plots.comparison_figure."""
+"""Adapter: one FEM/IFENN pair -> ifenn.studies.figures.comparison_figure."""
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import comparison_figure
+from ifenn.studies.figures import comparison_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,8 +1,8 @@
-"""Adapter: history.csv -> ifenn.studies.plots.force_displacement_figure (PNG)."""
+"""Adapter: history.csv -> ifenn.studies.figures.force_displacement_figure (PNG)."""
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import force_displacement_figure
+from ifenn.studies.figures import force_displacement_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,7 +1,7 @@
-"""Adapter: scene config -> ifenn.studies.plots.mesh_figure (PNG)."""
+"""Adapter: scene config -> ifenn.studies.figures.mesh_figure (PNG)."""
 from ifenn.fem.mesh import build_mesh
 from ifenn.io import log_to
-from ifenn.studies.plots import mesh_figure
+from ifenn.studies.figures import mesh_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

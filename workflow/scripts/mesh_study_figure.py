@@ -1,8 +1,8 @@
-"""Adapter: FEM/IFENN pairs on several meshes -> ifenn.studies.plots.mesh_study_figure."""
+"""Adapter: FEM/IFENN pairs on several meshes -> ifenn.studies.figures.mesh_study_figure."""
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import mesh_study_figure
+from ifenn.studies.figures import mesh_study_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

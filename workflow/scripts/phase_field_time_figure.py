@@ -1,8 +1,8 @@
-"""Adapter: timing table -> ifenn.studies.plots.phase_field_time_figure."""
+"""Adapter: timing table -> ifenn.studies.figures.phase_field_time_figure."""
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import phase_field_time_figure
+from ifenn.studies.figures import phase_field_time_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

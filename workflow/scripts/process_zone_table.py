@@ -1,8 +1,8 @@
-"""Adapter: process-zone and full-image IFENN run folders -> ifenn.studies.metrics.process_zone_agreement, one row per pair."""
+"""Adapter: process-zone and full-image IFENN run folders -> ifenn.studies.tables.metrics.process_zone_agreement, one row per pair."""
 import pandas as pd
 
 from ifenn.io import log_to, write_csv
-from ifenn.studies.metrics import process_zone_agreement
+from ifenn.studies.tables.metrics import process_zone_agreement
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

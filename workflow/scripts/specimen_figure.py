@@ -1,11 +1,11 @@
 """Adapter: the specimen's histories (forces of the whole specimen), the first run's phi and the
-measured or published curve -> ifenn.studies.plots.specimen_figure and ifenn.studies.specimens.specimen_table."""
+measured or published curve -> ifenn.studies.figures.specimen_figure and ifenn.studies.tables.specimens.specimen_table."""
 import pandas as pd
 
 from ifenn.io import atomic_path, log_to
 from ifenn.run_files import read_phase_field_maps
-from ifenn.studies.plots import specimen_figure
-from ifenn.studies.specimens import specimen_table
+from ifenn.studies.figures import specimen_figure
+from ifenn.studies.tables.specimens import specimen_table
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

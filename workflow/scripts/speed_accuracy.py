@@ -1,9 +1,9 @@
-"""Adapter: run histories (+ the phase-field benchmark, quoted in the figure) -> ifenn.studies.speed_accuracy table and figure."""
+"""Adapter: run histories (+ the phase-field benchmark, quoted in the figure) -> ifenn.studies.tables.speed_accuracy table and figure."""
 import pandas as pd
 
 from ifenn.io import log_to, write_csv
-from ifenn.studies.plots import speed_accuracy_figure
-from ifenn.studies.speed_accuracy import speed_accuracy_table
+from ifenn.studies.figures import speed_accuracy_figure
+from ifenn.studies.tables.speed_accuracy import speed_accuracy_table
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -2,7 +2,7 @@
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import stability_map_figure
+from ifenn.studies.figures import stability_map_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

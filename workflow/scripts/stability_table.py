@@ -1,6 +1,6 @@
-"""Adapter: stability cells -> ifenn.studies.stability.stability_table (metrics and labels)."""
+"""Adapter: stability cells -> ifenn.studies.drivers.stability.stability_table (metrics and labels)."""
 from ifenn.io import log_to, write_csv
-from ifenn.studies.stability import stability_table
+from ifenn.studies.drivers.stability import stability_table
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,6 +1,6 @@
-"""Adapter: this run's tables and machine_speed.json -> ifenn.studies.summary -> results/summary.md."""
+"""Adapter: this run's tables and machine_speed.json -> ifenn.studies.tables.summary -> results/summary.md."""
 from ifenn.io import log_to
-from ifenn.studies.summary import write_summary
+from ifenn.studies.tables.summary import write_summary
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

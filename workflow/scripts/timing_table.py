@@ -1,9 +1,9 @@
-"""Adapter: FEM and IFENN histories -> ifenn.studies.metrics.timing, rows per run and method."""
+"""Adapter: FEM and IFENN histories -> ifenn.studies.tables.metrics.timing, rows per run and method."""
 import pandas as pd
 
 from ifenn.io import log_to, write_csv
 from ifenn.run_files import read_history
-from ifenn.studies.metrics import timing
+from ifenn.studies.tables.metrics import timing
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -1,7 +1,7 @@
-"""Adapter: training data -> ifenn.studies.plots.training_data_figure."""
+"""Adapter: training data -> ifenn.studies.figures.training_data_figure."""
 from ifenn.io import log_to
 from ifenn.network.training_data import read_training_data
-from ifenn.studies.plots import training_data_figure
+from ifenn.studies.figures import training_data_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

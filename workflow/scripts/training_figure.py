@@ -1,10 +1,10 @@
-"""Adapter: training data, model, loss log -> ifenn.studies.plots.training_figure."""
+"""Adapter: training data, model, loss log -> ifenn.studies.figures.training_figure."""
 import pandas as pd
 
 from ifenn.io import log_to
 from ifenn.network.picnn import load_picnn
 from ifenn.network.training_data import read_training_data
-from ifenn.studies.plots import training_figure
+from ifenn.studies.figures import training_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

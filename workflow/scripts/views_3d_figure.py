@@ -1,6 +1,6 @@
-"""Adapter: one FEM/IFENN pair -> ifenn.studies.plots.views_3d_figure."""
+"""Adapter: one FEM/IFENN pair -> ifenn.studies.figures.views_3d_figure."""
 from ifenn.io import log_to
-from ifenn.studies.plots import views_3d_figure
+from ifenn.studies.figures import views_3d_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

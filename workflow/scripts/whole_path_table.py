@@ -1,4 +1,4 @@
-"""Adapter: whole-path IFENN and FEM run folders -> ifenn.studies.whole_path tables and figure."""
+"""Adapter: whole-path IFENN and FEM run folders -> ifenn.studies.drivers.whole_path tables and figure."""
 from ifenn.io import log_to
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
@@ -8,8 +8,8 @@ import pandas as pd  # noqa: E402
 
 from ifenn.io import write_csv  # noqa: E402
 from ifenn.run_files import read_history, read_spec  # noqa: E402
-from ifenn.studies.plots import whole_path_figure  # noqa: E402
-from ifenn.studies.whole_path import network_before_nucleation, whole_path_table  # noqa: E402
+from ifenn.studies.drivers.whole_path import network_before_nucleation, whole_path_table  # noqa: E402
+from ifenn.studies.figures import whole_path_figure  # noqa: E402
 
 runs = snakemake.params.runs
 table = whole_path_table(runs, snakemake.params.targets)

@@ -1,8 +1,8 @@
-"""Adapter: the whole-run benchmark's tables -> ifenn.studies.plots.whole_run_speed_figure."""
+"""Adapter: the whole-run benchmark's tables -> ifenn.studies.figures.whole_run_speed_figure."""
 import pandas as pd
 
 from ifenn.io import log_to
-from ifenn.studies.plots import whole_run_speed_figure
+from ifenn.studies.figures import whole_run_speed_figure
 
 snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])

@@ -353,7 +353,7 @@ def _adaptive_problems(config: dict, schema: dict) -> list[str]:
 
 
 def _switch_over_problems(config: dict) -> list[str]:
-    """The switch-over criterion of every IFENN run, and the runs that name whole-path runs."""
+    """The switch-over criterion of every IFENN run (and the whole-path runs', :func:`_whole_path_problems`)."""
     problems = []
     runs = config.get("ifenn_runs", {})
     for name, entry in runs.items():
@@ -377,6 +377,13 @@ def _switch_over_problems(config: dict) -> list[str]:
     if config["ifenn"].get("switch_increment") is not None and config["ifenn"].get("switch_over", "phi_threshold") != "increment":
         problems.append(f"config key 'ifenn.switch_increment': {config['ifenn']['switch_increment']} is read only with "
                         f"switch_over 'increment', got '{config['ifenn'].get('switch_over')}'")
+    return problems + _whole_path_problems(config)
+
+
+def _whole_path_problems(config: dict) -> list[str]:
+    """The runs that name whole-path runs (whole_path, whole_run_benchmark) and the benchmark's pairs."""
+    problems = []
+    runs = config.get("ifenn_runs", {})
     for section in ("whole_path", "whole_run_benchmark"):
         for k, run in enumerate(config.get(section, {}).get("runs", [])):
             if run not in runs:
@@ -384,7 +391,7 @@ def _switch_over_problems(config: dict) -> list[str]:
             elif switch_over(config, run)[0] != "start":
                 problems.append(f"config key '{section}.runs[{k}]': '{run}' switches by '{switch_over(config, run)[0]}'; "
                                 "a whole-path run needs switch_over 'start'")
-    # the benchmark's runs are computed in one process with their FEM runs (ifenn.studies.whole_run_benchmark)
+    # the benchmark's runs are computed in one process with their FEM runs (ifenn.studies.drivers.whole_run_benchmark)
     paired = {}
     for k, run in enumerate(config.get("whole_run_benchmark", {}).get("runs", [])):
         fem_run = runs.get(run, {}).get("fem_run")

@@ -36,7 +36,7 @@ def switch_over(config: dict, run: str) -> tuple[str, int | None]:
 def paired_runs(config: dict) -> dict[str, str]:
     """FEM run -> whole-path IFENN run, for the runs of 'whole_run_benchmark': the workflow computes
     each pair in one process, increments interleaved, and the benchmark reads their histories
-    (:func:`ifenn.studies.whole_run_benchmark.paired_whole_run`); {} without the section."""
+    (:func:`ifenn.studies.drivers.whole_run_benchmark.paired_whole_run`); {} without the section."""
     return {config["ifenn_runs"][run]["fem_run"]: run for run in (config.get("whole_run_benchmark") or {}).get("runs", [])}
 
 

@@ -197,7 +197,7 @@ class StaggeredRun:
     def steps(self):
         """The run as a generator: yields each increment's row after its snapshot and checkpoint,
         and writes the outputs after the last. Two runs advanced in turn (``next`` on each) run
-        interleaved in one process (:func:`ifenn.studies.whole_run_benchmark.paired_whole_run`); the wall time in
+        interleaved in one process (:func:`ifenn.studies.drivers.whole_run_benchmark.paired_whole_run`); the wall time in
         provenance.json counts only the time spent in this run's own steps."""
         spec = self.spec
         own_s, started = 0.0, time.perf_counter()

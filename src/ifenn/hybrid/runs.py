@@ -131,6 +131,22 @@ def network_service(spec: dict, model_path, h_px: float) -> dict:
                                   f"this scene has Gc = {Gc:g}, lc = {lc:g} at lc/h_px = {lc / h_px:.4g}"}
 
 
+def verified_step(spec: dict, h_px: float, warm_starter, warm_start: str, scale: float = 1.0):
+    """The verified step of ``spec`` on the CPU (:class:`ifenn.hybrid.verification.VerifiedInference`
+    on the run's pixel equation, slits cut, with its ``verification`` settings) around ``warm_starter``
+    (the engine whose answer starts the correction; None with ``warm_start='previous'``). ``scale``:
+    the network is fed ``scale`` H (another material's H in its own units), so the published cap on
+    this run's H is the run's cap / scale."""
+    from ifenn.hybrid.verification import VerifiedInference
+    from ifenn.pixel_equation.numpy_backend import PixelEquation
+
+    verification = spec["verification"]
+    equation = PixelEquation(spec["material"]["Gc"], spec["material"]["lc"], h_px, spec["pixel_padding"], slit_cuts(spec))
+    return VerifiedInference(warm_starter, equation, verification["tolerance"], verification["margin_lc"], verification["max_rounds"],
+                             verification["solve_fraction"], warm_start, spec["history_cap"] / scale,
+                             verification.get("cap_history", False))
+
+
 def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape: tuple[int, int] | None = None,
                    device="auto", service: dict | None = None):
     """The pixel phase-field map of a hybrid run: capped H image -> (smoothed) phi image,
@@ -143,9 +159,6 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
     scale = service["history_scale"]
     verification = spec.get("verification") or {}
     if verification.get("enabled"):
-        from ifenn.hybrid.verification import VerifiedInference
-        from ifenn.pixel_equation.numpy_backend import PixelEquation
-
         if spec["predictor"] != "picnn":
             raise ValueError("verification checks the PICNN's prediction: it needs predictor 'picnn'")
         warm_start = "previous" if service["fallback"] else verification["warm_start"]
@@ -170,8 +183,7 @@ def make_inference(spec: dict, model_path: str | Path | None, h_px: float, shape
             if verification.get("network_tolerance") is not None:
                 zone = {**zone, "tolerance": verification["network_tolerance"]}
             network = network_inference({**spec, "process_zone": zone}, model_path, h_px, shape, device, scale)
-        equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
-        return VerifiedInference(network, equation, *settings)
+        return verified_step(spec, h_px, network, warm_start, scale)
     if service["fallback"]:
         raise ValueError(f"the network cannot serve this scene's material ({service['fallback']}): run it verified "
                          "(the certified pixel step) or with predictor exact_pixel")

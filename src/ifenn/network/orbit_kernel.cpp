@@ -72,7 +72,7 @@ inline v16 activate(v16 z, int activation) {
 }
 
 // The orbit sums of one channel at 16 pixels starting at p (a pointer into a padded image
-// with row stride wp), in the order (a, b), 0 <= a <= b <= R, of ifenn.orbit.
+// with row stride wp), in the order (a, b), 0 <= a <= b <= R, of ifenn.network.orbit.
 template <int R>
 inline void orbit_sums(const float* p, int wp, v16* out) {
     v16 t[R + 1][2 * R + 1];

@@ -321,7 +321,7 @@ def _train(history_maps, h_px, Gc, lc, s, seed, progress, monitor, monitor_every
 # Scoring against FEM
 # ---------------------------------------------------------------------------------------
 #: Defaults of score_picnn: reference phi above which a pixel is scored as "crack" (any damage
-#: worth scoring: 0.05, not the crack set {phi >= 0.5} of ifenn.studies.metrics.CRACK_PHI) / "fully broken".
+#: worth scoring: 0.05, not the crack set {phi >= 0.5} of ifenn.studies.tables.metrics.CRACK_PHI) / "fully broken".
 SCORE_CRACK_PHI = 0.05
 BROKEN_PHI = 0.9
 

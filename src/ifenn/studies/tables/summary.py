@@ -137,7 +137,7 @@ def render_summary(tables: dict[str, str | Path], machine: str | Path | None = N
         raise ValueError(f"no summary section for {unknown}; known: {sorted(SECTIONS)}")
     date = date or dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = ["# What this run of the workflow measured", "",
-             f"Written by the workflow (rule `summary`, `ifenn.studies.summary`) on {date} from the tables "
+             f"Written by the workflow (rule `summary`, `ifenn.studies.tables.summary`) on {date} from the tables "
              "of this run; every number below is in the file its section links to.",
              "", _machine_line(Path(machine) if machine else None), ""]
     if config_files:

@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_spec
-from ifenn.studies.metrics import force_curve_error, post_peak_rms, u_at_half_drop, work_rel_error
+from ifenn.studies.tables.metrics import force_curve_error, post_peak_rms, u_at_half_drop, work_rel_error
 
 
 def _label(method: str, spec: dict) -> str:

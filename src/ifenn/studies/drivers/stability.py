@@ -107,7 +107,7 @@ def resample(image: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 def cell_metrics(cell_dir: str | Path, reference_dir: str | Path) -> dict:
     """Peak and final force, crack IoU of the final phase field against the reference
     (both resampled to the coarser pixel grid) and the reference's peak force."""
-    from ifenn.studies.metrics import crack_iou, force_curve_error
+    from ifenn.studies.tables.metrics import crack_iou, force_curve_error
 
     cell_dir, reference_dir = Path(cell_dir), Path(reference_dir)
     status = run_files.read_status(cell_dir)

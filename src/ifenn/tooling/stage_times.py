@@ -188,3 +188,43 @@ def wall_bound(table: pd.DataFrame, cores: int, critical_s: float = 0.0) -> floa
     (``critical_s``, :func:`critical_path`), whichever is largest (every job here uses one core)."""
     total = table[table.stage == "total"].iloc[0]
     return max(float(total.wall_s) / cores, float(total.longest_s), float(critical_s))
+
+
+def report(workdir: str | Path, snakefile: str | Path, configfiles: list[str] | None = None, cores: int = 2,
+           every_file: bool = False, top: int = 0) -> str:
+    """What ``python -m ifenn stage-times`` prints: the stages' sums (a markdown table), the CPU
+    sampling and machine lines, the wall-time bound on ``cores`` with the longest chain of jobs, and
+    the ``top`` longest jobs; only the benchmark files of the current DAG unless ``every_file``."""
+    def some(paths):
+        return ", ".join(paths[:8]) + (", ..." if len(paths) > 8 else "")
+
+    lines: list[str] = []
+    keep, dag = None, None
+    if not every_file:
+        dag = dag_jobs(workdir, snakefile, configfiles)
+        keep = {job["benchmark"] for job in dag if job["benchmark"]}
+        stale, missing = unmatched(workdir, keep)
+        if stale:
+            lines.append(f"left out: {len(stale)} benchmark files no job of the current DAG writes ({some(stale)})\n")
+        if missing:
+            lines.append(f"not run yet: {len(missing)} of the DAG's {len(keep)} jobs have no benchmark file ({some(missing)}); "
+                         "the sums below count less than `snakemake all` spends\n")
+    table = stage_times(workdir, keep)
+    lines.append(table.to_markdown(index=False))
+    jobs = job_times(workdir, keep)
+    lines.append("\n" + cpu_sampling_line(jobs.wall_s))
+    machine = machine_speed_line(workdir)
+    lines.append(machine or f"the machine: not measured ({MACHINE_SPEED} is written by the workflow's first job)")
+    chain_s, chain = 0.0, []
+    if dag is not None:
+        wall = {f"benchmarks/{job}.tsv": seconds for job, seconds in zip(jobs.job, jobs.wall_s, strict=True)}
+        chain_s, chain = critical_path(dag, wall)
+    lines.append(f"\non {cores} cores: at least {wall_bound(table, cores, chain_s) / 60:.1f} min "
+                 "(summed wall / cores, the longest job, or the longest chain of jobs that wait for each other)")
+    if chain:
+        steps = [f"{path.removeprefix('benchmarks/').removesuffix('.tsv')} {wall.get(path, 0.0):.0f} s"
+                 for path in chain if wall.get(path, 0.0) >= 1.0]
+        lines.append(f"the longest chain: {chain_s / 60:.1f} min: " + " -> ".join(steps))
+    if top:
+        lines.append(f"\nthe {min(top, len(jobs))} longest jobs:\n" + jobs.head(top)[["job", "wall_s", "cpu_s"]].round(1).to_markdown(index=False))
+    return "\n".join(lines)

@@ -1,8 +1,8 @@
-"""Figures (matplotlib, Agg). Each function writes one file atomically and returns nothing."""
+"""The figures of what the workflow measures beyond the paper: the stability map, speed against
+accuracy, the error's sources, the whole path, the whole run's speed, the finer references, the
+adaptive mesh, what a network is worth, and a specimen against its source."""
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import matplotlib
 
@@ -10,360 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ifenn import geometry  # noqa: E402
-from ifenn.fem import supports  # noqa: E402
-from ifenn.io import atomic_path  # noqa: E402
-from ifenn.run_files import read_phase_field_maps  # noqa: E402, F401 (the adapters read maps through plots)
-
-
-def _save(fig, path) -> None:
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=150, bbox_inches="tight", format=path.suffix.lstrip(".") or "png")
-    plt.close(fig)
-
-
-def mesh_figure(mesh, scene: dict, name: str, path) -> None:
-    """The scene: element grid (every line up to 60 per direction, else every k-th), slit
-    notches (red), history notches (orange), fixed components (hatched edges) and loaded
-    components (arrows)."""
-    (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
-    fig, ax = plt.subplots(figsize=(6, 6 * (y1 - y0) / (x1 - x0) + 0.6))
-    stride_x = max(1, mesh.nx // 60)
-    stride_y = max(1, mesh.ny // 60)
-    for i in range(0, mesh.nx + 1, stride_x):
-        ax.plot([x0 + i * mesh.h] * 2, [y0, y1], color="0.8", lw=0.3)
-    for j in range(0, mesh.ny + 1, stride_y):
-        ax.plot([x0, x1], [y0 + j * mesh.h] * 2, color="0.8", lw=0.3)
-    ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], color="k", lw=1)
-    for slit in mesh.slits:
-        (ax_, ay), (bx, by) = slit["snapped"]
-        ax.plot([ax_, bx], [ay, by], color="red", lw=2.5, label=f"slit ({slit['n_twins']} twin nodes)")
-    for notch in scene.get("notches", []):
-        if notch["kind"] == "history":
-            (ax_, ay), (bx, by) = notch["start"], notch["end"]
-            ax.plot([ax_, bx], [ay, by], color="orange", lw=2.5, ls="--", label="history notch")
-    span = max(x1 - x0, y1 - y0)
-    outward = {"left": (-1, 0), "right": (1, 0), "bottom": (0, -1), "top": (0, 1)}
-    for condition in supports.conditions(scene):
-        (ax_, ay), (bx, by) = condition.start, condition.end
-        nx_, ny_ = outward.get(condition.edge, (0, -1) if condition.kind == "fixed" else (0, 1))
-        component = "xy"[condition.component]
-        if condition.kind == "fixed":
-            if condition.is_point:
-                ax.plot([ax_], [ay], marker="^", ms=9, color="tab:blue", alpha=0.7)
-            else:
-                ax.plot([ax_, bx], [ay, by], color="tab:blue", lw=5, alpha=0.5)
-            shift = 0.06 + 0.04 * condition.component
-            ax.text((ax_ + bx) / 2 + nx_ * shift * span, (ay + by) / 2 + ny_ * shift * span,
-                    f"u{component} = 0", ha="center", va="center", color="tab:blue", fontsize=8)
-        else:
-            sign = -1.0 if condition.kind == "-load" else 1.0
-            dx, dy = (sign * 0.06 * span, 0) if component == "x" else (0, sign * 0.06 * span)
-            for t in (np.linspace(0.1, 0.9, 5) if not condition.is_point else [0.0]):
-                px, py = ax_ + t * (bx - ax_), ay + t * (by - ay)
-                ax.annotate("", xy=(px + dx, py + dy), xytext=(px, py), arrowprops={"arrowstyle": "->", "color": "tab:green"})
-            ax.text((ax_ + bx) / 2 + nx_ * 0.12 * span, (ay + by) / 2 + ny_ * 0.12 * span,
-                    f"u{component} = {'-' if sign < 0 else ''}u",
-                    ha="center", va="center", color="tab:green", fontsize=8)
-    for a, b, c, d in geometry.cutouts(scene):
-        ax.fill([a, b, b, a], [c, c, d, d], facecolor="white", edgecolor="k", hatch="//", lw=1, zorder=5,
-                label="cut-out")
-    handles, labels = ax.get_legend_handles_labels()
-    unique = dict(zip(labels, handles, strict=False))
-    if unique:
-        ax.legend(unique.values(), unique.keys(), loc="upper right", fontsize=7)
-    ax.set_aspect("equal")
-    ax.set_xlim(x0 - 0.18 * span, x1 + 0.18 * span)
-    ax.set_ylim(y0 - 0.18 * span, y1 + 0.18 * span)
-    ax.set_xlabel("x (mm)")
-    ax.set_ylabel("y (mm)")
-    ax.set_title(f"{name}: {mesh.nx} x {mesh.ny} Q1 elements, h = {mesh.h:.4g} mm, {len(mesh.points)} nodes")
-    _save(fig, path)
-
-
-def force_displacement_figure(curves: dict, path, title: str = "", u_max: float | None = None, force_unit: str = "N/mm") -> None:
-    """Reaction force against prescribed displacement; ``curves`` maps label -> DataFrame
-    with columns u and reaction_force; ``force_unit``: N for a scene with a thickness."""
-    fig, ax = plt.subplots(figsize=(5.5, 4))
-    for label, frame in curves.items():
-        frame = frame if u_max is None else frame[frame["u"] <= u_max + 1e-15]
-        ax.plot(frame["u"], frame["reaction_force"], label=label, lw=1.4)
-    ax.set_xlabel("prescribed displacement u (mm)")
-    ax.set_ylabel(f"reaction force ({force_unit})")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend()
-    _save(fig, path)
-
-
-def specimen_figure(curves: dict, measured, measured_label: str, phi_maps: dict, attrs: dict, scene: dict,
-                    path, title: str = "") -> None:
-    """A specimen against its measurement: left, the force of each run (``curves``: label ->
-    history frame, forces in the scene's units) over the measured curve (``measured``: columns
-    displacement_mm and the force); right, phi of the first run at three load levels (``phi_maps``:
-    increment -> (u, image), ``attrs``: the pixel grid), the scene's cut-outs blanked."""
-    from ifenn import geometry
-    from ifenn.pixels import PixelGrid
-
-    unit = "N" if "thickness" in scene else "N/mm"
-    fig = plt.figure(figsize=(15, 4.2))
-    grid = fig.add_gridspec(1, 4, width_ratios=[1.4, 1, 1, 1])
-    ax = fig.add_subplot(grid[0])
-    force = [c for c in measured.columns if c != "displacement_mm"][0]
-    ax.plot(measured["displacement_mm"], measured[force], "k.", ms=4, label=measured_label)
-    for label, frame in curves.items():
-        ax.plot(frame["u"], frame["reaction_force"], lw=1.4, label=label)
-    ax.set_xlabel("displacement of the load (mm)")
-    ax.set_ylabel(f"force ({unit})")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title(title)
-    increments = sorted(phi_maps)
-    if increments:
-        pixel_grid = PixelGrid(float(attrs["x0"]), float(attrs["y0"]), float(attrs["h_px"]), int(attrs["nx_px"]), int(attrs["ny_px"]))
-        solid = geometry.solid_pixels(scene, pixel_grid)
-        (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
-        picks = [increments[len(increments) // 3], increments[2 * len(increments) // 3], increments[-1]]
-        for k, increment in enumerate(picks):
-            u, phi = phi_maps[increment]
-            axis = fig.add_subplot(grid[k + 1])
-            image = axis.imshow(np.where(solid, phi, np.nan), origin="lower", extent=[x0, x1, y0, y1], vmin=0, vmax=1, cmap="magma_r")
-            axis.set_title(f"phi at u = {u:.4g} mm", fontsize=9)
-            axis.set_xticks([])
-            axis.set_yticks([])
-        fig.colorbar(image, ax=axis, fraction=0.046)
-    _save(fig, path)
-
-
-def _gauss_point_coordinates(data: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Coordinates (mm) of the Gauss point behind each pixel: in element (i, j) of size
-    h = 2 h_px the 2x2 points sit at (i + 1/2 -+ 1/(2 sqrt 3)) h, the lower one in the even pixel."""
-    h = 2.0 * float(data["h_px"])
-    offset = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
-    x = float(data["x0"]) + (np.arange(int(data["nx_px"])) // 2 + offset[np.arange(int(data["nx_px"])) % 2]) * h
-    y = float(data["y0"]) + (np.arange(int(data["ny_px"])) // 2 + offset[np.arange(int(data["ny_px"])) % 2]) * h
-    return np.meshgrid(x, y)
-
-
-def _extent(data: dict) -> list[float]:
-    x0, y0, h = float(data["x0"]), float(data["y0"]), float(data["h_px"])
-    return [x0, x0 + int(data["nx_px"]) * h, y0, y0 + int(data["ny_px"]) * h]
-
-
-def training_data_figure(data: dict, path, zoom_half_width_px: int = 40) -> None:
-    """H at the Gauss points (scatter, zoomed on the crack tip) beside the pixel map (whole
-    image), one row per training increment; log colour scale shared per row."""
-    from matplotlib.colors import LogNorm
-
-    gx, gy = _gauss_point_coordinates(data)
-    n = len(data["increment"])
-    fig, axes = plt.subplots(n, 2, figsize=(12, 5 * n), squeeze=False, gridspec_kw={"wspace": 0.35})
-    for k in range(n):
-        history = np.maximum(data["history"][k], 1e-3)
-        norm = LogNorm(vmin=max(history.min(), 1e-2), vmax=history.max())
-        # zoom on the crack tip: the cracked pixel (phi > 0.5) farthest from the domain boundary
-        phi = data["phase_field_gp"][k]
-        ny, nx = phi.shape
-        jj, ii = np.mgrid[0:ny, 0:nx]
-        depth = np.minimum.reduce([ii, nx - 1 - ii, jj, ny - 1 - jj])
-        iy, ix = np.unravel_index(np.argmax(np.where(phi > 0.5, depth, -1)), phi.shape)
-        rows = slice(max(iy - zoom_half_width_px, 0), iy + zoom_half_width_px)
-        cols = slice(max(ix - zoom_half_width_px, 0), ix + zoom_half_width_px)
-        ax = axes[k, 0]
-        sc = ax.scatter(gx[rows, cols], gy[rows, cols], c=history[rows, cols], s=4, norm=norm, cmap="inferno")
-        ax.set_aspect("equal")
-        ax.set_title(f"increment {int(data['increment'][k])}, u = {float(data['u'][k]):.4g} mm\nH at the Gauss points near the crack tip")
-        ax.set_xlabel("x (mm)")
-        ax.set_ylabel("y (mm)")
-        fig.colorbar(sc, ax=ax, label="H (N/mm$^2$)")
-        ax = axes[k, 1]
-        im = ax.imshow(history, origin="lower", extent=_extent(data), norm=norm, cmap="inferno", interpolation="nearest")
-        ax.set_title(f"pixel map {history.shape[1]} x {history.shape[0]}\nh_px = {float(data['h_px']):.4g} mm")
-        ax.add_patch(plt.Rectangle((gx[rows, cols].min(), gy[rows, cols].min()), np.ptp(gx[rows, cols]), np.ptp(gy[rows, cols]),
-                                   fill=False, edgecolor="cyan", lw=1))
-        ax.set_xlabel("x (mm)")
-        fig.colorbar(im, ax=ax, label="H (N/mm$^2$)")
-    _save(fig, path)
-
-
-def training_figure(data: dict, model, loss, path) -> None:
-    """Loss per epoch, then per training increment: FEM phi, PICNN phi (no smoothing), |error|."""
-    n = len(data["increment"])
-    fig = plt.figure(figsize=(13, 3.2 + 3.8 * n))
-    grid = fig.add_gridspec(n + 1, 3, height_ratios=[0.8] + [1.0] * n)
-    ax = fig.add_subplot(grid[0, :])
-    for stage, part in loss.groupby("stage", sort=False):
-        ax.semilogy(part["epoch"], part["loss"], lw=0.8, label=f"{stage}")
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("physics loss ||R||$_2$")
-    ax.set_title(f"training: {len(loss)} epochs, {float(loss['wall_s'].iloc[-1]):.0f} s")
-    ax.legend()
-    ax.grid(alpha=0.3)
-    for k in range(n):
-        reference = data["phase_field_gp"][k]
-        predicted = model.predict(data["history"][k])
-        error = np.abs(predicted - reference)
-        panels = [(reference, "FEM phi (Gauss points)", "viridis", (0, 1)),
-                  (predicted, "PICNN phi (no smoothing)", "viridis", (0, 1)),
-                  (error, f"|error|: mean {error.mean():.4f}, max {error.max():.3f}", "magma", (0, max(error.max(), 1e-6)))]
-        for col, (image, title, cmap, (lo, hi)) in enumerate(panels):
-            ax = fig.add_subplot(grid[k + 1, col])
-            im = ax.imshow(image, origin="lower", extent=_extent(data), cmap=cmap, vmin=lo, vmax=hi)
-            ax.set_title(f"inc {int(data['increment'][k])}: {title}", fontsize=9)
-            fig.colorbar(im, ax=ax, fraction=0.046)
-    fig.tight_layout()
-    _save(fig, path)
-
-
-def _window(attrs: dict, zoom: dict | None):
-    """Row/column slices and extent (mm) of a zoom window {x: [a, b], y: [c, d]} of a pixel map."""
-    x0, y0, h = float(attrs["x0"]), float(attrs["y0"]), float(attrs["h_px"])
-    nx, ny = int(attrs["nx_px"]), int(attrs["ny_px"])
-    if not zoom:
-        return slice(0, ny), slice(0, nx), [x0, x0 + nx * h, y0, y0 + ny * h]
-    c0, c1 = (max(int(np.floor((v - x0) / h)), 0) for v in (zoom["x"][0], zoom["x"][1]))
-    r0, r1 = (max(int(np.floor((v - y0) / h)), 0) for v in (zoom["y"][0], zoom["y"][1]))
-    return slice(r0, r1), slice(c0, c1), [x0 + c0 * h, x0 + c1 * h, y0 + r0 * h, y0 + r1 * h]
-
-
-def comparison_levels(fem_maps: dict, ifenn_maps: dict, switch: int, count: int) -> list[int]:
-    """``count`` saved increments common to both runs, evenly spread from the switch-over on."""
-    common = sorted(i for i in set(fem_maps) & set(ifenn_maps) if i >= switch)
-    if not common:
-        return []
-    return sorted({common[int(round(k))] for k in np.linspace(0, len(common) - 1, count)})
-
-
-def comparison_figure(fem_history, ifenn_history, fem_fields, ifenn_fields, path, title: str,
-                      levels: int = 4, zoom: dict | None = None, verified_history=None, verified_fields=None) -> None:
-    """Force curves of FEM and IFENN, then phase-field contours at ``levels`` load levels after
-    the switch-over: FEM (top row), IFENN as published, and verified IFENN when given (its
-    history and fields), same colour scale."""
-    fem_maps, attrs = read_phase_field_maps(fem_fields)
-    ifenn_maps, _ = read_phase_field_maps(ifenn_fields)
-    panels = [("FEM", fem_maps), ("IFENN", ifenn_maps)]
-    if verified_fields is not None:
-        verified_maps, _ = read_phase_field_maps(verified_fields)
-        panels.append(("verified IFENN", verified_maps))
-        common = {k: v for k, v in ifenn_maps.items() if k in verified_maps}
-    else:
-        common = ifenn_maps
-    switch = int(ifenn_history.increment[ifenn_history.hybrid_active == 1].min())
-    chosen = comparison_levels(fem_maps, common, switch, levels)
-    rows, cols, extent = _window(attrs, zoom)
-    ncol = max(len(chosen), 1)
-    aspect = (extent[3] - extent[2]) / (extent[1] - extent[0])
-    n_maps = len(panels)
-    fig = plt.figure(figsize=(3.2 * ncol + 1, 3.6 + n_maps * 3.2 * aspect + 0.6))
-    grid = fig.add_gridspec(1 + n_maps, ncol, height_ratios=[1.3] + [aspect * 1.1] * n_maps, hspace=0.5)
-    ax = fig.add_subplot(grid[0, :])
-    ax.plot(fem_history.u, fem_history.reaction_force, label="FEM", lw=1.6)
-    ax.plot(ifenn_history.u, ifenn_history.reaction_force, "--", label="IFENN (published)", lw=1.6)
-    if verified_history is not None:
-        ax.plot(verified_history.u, verified_history.reaction_force, "-.", label="verified IFENN", lw=1.6)
-    ax.axvline(ifenn_history.u[ifenn_history.increment == switch].iloc[0], color="0.5", lw=0.8, ls=":", label="switch-over")
-    for k, increment in enumerate(chosen):
-        ax.axvline(fem_maps[increment][0], color="0.8", lw=0.6)
-        ax.text(fem_maps[increment][0], ax.get_ylim()[1] * 0.95, str(k + 1), ha="center", fontsize=8)
-    ax.set_xlabel("u (mm)")
-    ax.set_ylabel("reaction force (N/mm)")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    image = None
-    for k, increment in enumerate(chosen):
-        for r, (label, maps) in enumerate(panels):
-            ax = fig.add_subplot(grid[r + 1, k])
-            image = ax.imshow(maps[increment][1][rows, cols], origin="lower", extent=extent, cmap="jet", vmin=0, vmax=1)
-            ax.set_title(f"{k + 1}: {label}, u = {maps[increment][0]:.4g}", fontsize=8)
-            ax.tick_params(labelsize=7)
-    if image is not None:
-        fig.colorbar(image, ax=fig.axes[1:], shrink=0.8, label="phi (Gauss points)")
-    _save(fig, path)
-
-
-def views_3d_figure(fem_fields, ifenn_fields, increment: int, views: list, path, zoom: dict | None = None) -> None:
-    """phi at the Gauss points of one increment as 3D surfaces, FEM (top) and IFENN (bottom),
-    seen from each (azimuth, elevation) pair in ``views`` (degrees)."""
-    fem_maps, attrs = read_phase_field_maps(fem_fields)
-    ifenn_maps, _ = read_phase_field_maps(ifenn_fields)
-    rows, cols, extent = _window(attrs, zoom)
-    h = float(attrs["h_px"])
-    fig = plt.figure(figsize=(3.4 * len(views), 7))
-    for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
-        phi = maps[increment][1][rows, cols]
-        x = extent[0] + (np.arange(phi.shape[1]) + 0.5) * h
-        y = extent[2] + (np.arange(phi.shape[0]) + 0.5) * h
-        X, Y = np.meshgrid(x, y)
-        for c, (azimuth, elevation) in enumerate(views):
-            ax = fig.add_subplot(2, len(views), r * len(views) + c + 1, projection="3d")
-            ax.plot_surface(X, Y, phi, cmap="jet", vmin=0, vmax=1, linewidth=0, antialiased=False, rcount=120, ccount=120)
-            ax.view_init(elev=elevation, azim=azimuth)
-            ax.set_zlim(0, 1)
-            ax.set_title(f"{label}: az {azimuth}, el {elevation}", fontsize=8)
-            ax.tick_params(labelsize=6)
-    fig.suptitle(f"phi at the Gauss points, increment {increment} (u = {fem_maps[increment][0]:.4g} mm)")
-    _save(fig, path)
-
-
-def mesh_study_figure(cases: list[dict], path, u_max: float, zoom: dict | None = None) -> None:
-    """Force curves of FEM and IFENN for several meshes (cut at u_max), and zoomed phase-field
-    contours of each at the last saved increment with u <= u_max. ``cases``: dicts with keys
-    label, fem_history, ifenn_history, fem_fields, ifenn_fields."""
-    fig = plt.figure(figsize=(4 * len(cases), 9))
-    grid = fig.add_gridspec(3, len(cases), height_ratios=[1.4, 1, 1])
-    ax = fig.add_subplot(grid[0, :])
-    for k, case in enumerate(cases):
-        color = f"C{k}"
-        for frame, style, method in ((case["fem_history"], "-", "FEM"), (case["ifenn_history"], "--", "IFENN")):
-            frame = frame[frame.u <= u_max + 1e-15]
-            ax.plot(frame.u, frame.reaction_force, style, color=color, label=f"{case['label']} {method}", lw=1.3)
-    ax.set_xlabel("u (mm)")
-    ax.set_ylabel("reaction force (N/mm)")
-    ax.legend(fontsize=7, ncol=len(cases))
-    ax.grid(alpha=0.3)
-    for k, case in enumerate(cases):
-        fem_maps, attrs = read_phase_field_maps(case["fem_fields"])
-        ifenn_maps, _ = read_phase_field_maps(case["ifenn_fields"])
-        common = [i for i in set(fem_maps) & set(ifenn_maps) if fem_maps[i][0] <= u_max + 1e-15]
-        if not common:
-            continue
-        increment = max(common)
-        rows, cols, extent = _window(attrs, zoom)
-        for r, (label, maps) in enumerate((("FEM", fem_maps), ("IFENN", ifenn_maps))):
-            ax = fig.add_subplot(grid[r + 1, k])
-            image = ax.imshow(maps[increment][1][rows, cols], origin="lower", extent=extent, cmap="jet", vmin=0, vmax=1)
-            ax.set_title(f"{case['label']} {label}, u = {maps[increment][0]:.4g}", fontsize=8)
-            ax.tick_params(labelsize=7)
-    fig.colorbar(image, ax=fig.axes[1:], shrink=0.8, label="phi")
-    _save(fig, path)
-
-
-def phase_field_time_figure(timing, cases: list[dict], path) -> None:
-    """Phase-field time per increment (left) and cumulative over the propagation stage
-    (right) against lc/h, FEM and IFENN. ``timing``: the timing table; ``cases``: dicts with
-    run and lc_over_h."""
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
-    for method, marker in (("fem", "o-"), ("ifenn", "s--")):
-        xs, per_inc, cumulative = [], [], []
-        for case in cases:
-            row = timing[(timing.run == case["run"]) & (timing.method == method)]
-            if len(row):
-                xs.append(case["lc_over_h"])
-                per_inc.append(float(row.t_phase_field_s.iloc[0]))
-                cumulative.append(float(row.phase_field_cumulative_s.iloc[0]))
-        left.plot(xs, per_inc, marker, label=method.upper())
-        right.plot(xs, cumulative, marker, label=method.upper())
-    left.set_ylabel("phase-field step per increment (s)")
-    right.set_ylabel("phase-field time, propagation stage (s)")
-    for ax in (left, right):
-        ax.set_xlabel("lc / h")
-        ax.grid(alpha=0.3)
-        ax.legend()
-    fig.suptitle("phase-field cost on this machine's CPU (one core): IFENN = pixels + inference + smoothing + back-projection")
-    _save(fig, path)
-
+from ifenn.studies.figures.common import save  # noqa: E402
 
 STABILITY_COLOURS = {"ok": "#4daf4a", "peak off": "#ffd92f", "crack path wrong": "#ff7f00",
                      "no load drop": "#e41a1c", "diverged": "#6a3d9a"}
@@ -397,7 +44,7 @@ def stability_map_figure(table, path) -> None:
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in STABILITY_COLOURS.values()]
     fig.legend(handles, list(STABILITY_COLOURS), loc="upper center", ncol=5, fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.1))
     fig.suptitle("Stability map: label of each cell (force-curve L2 error vs its reference, wall time)")
-    _save(fig, path)
+    save(fig, path)
 
 
 def speed_accuracy_figure(table, path, benchmark=None) -> None:
@@ -412,7 +59,7 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
     ``benchmark`` (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
     import textwrap
 
-    from ifenn.studies.speed_accuracy import PARETO
+    from ifenn.studies.tables.speed_accuracy import PARETO
 
     scenes = list(dict.fromkeys(table.scene))
     fig, axes = plt.subplots(len(scenes), 4, figsize=(25, 6.6 * len(scenes)), squeeze=False,
@@ -477,12 +124,14 @@ def speed_accuracy_figure(table, path, benchmark=None) -> None:
         title += ("\nIFENN phase-field step against the FEM one it replaces, same core (phase_field_speed.csv, "
                   f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
     fig.suptitle(title, fontsize=9)
-    _save(fig, path)
+    save(fig, path)
 
 
 ERROR_SOURCE_LABELS = {"pixel": "pixel equation vs Q1 FEM", "cap": "H cap", "network": "network vs exact pixel solve",
                        "smoothing": "Gaussian smoothing", "irreversibility": "max with FEM phi at switch-over",
                        "published_step": "published step (sum of the above)", "staggering": "single pass vs converged (FEM)"}
+
+
 ERROR_SOURCE_COLOURS = {"pixel": "tab:grey", "cap": "tab:purple", "network": "tab:red", "smoothing": "tab:blue",
                         "irreversibility": "tab:orange", "published_step": "k", "staggering": "tab:green"}
 
@@ -491,7 +140,7 @@ def error_sources_figure(sources, path) -> None:
     """Per run (rows): each source's force error over the FEM peak (left: the signed mean over the
     replayed states as bars, additive, so the parts sum to the published step; the RMS as diamonds;
     %) and the largest |phi difference| between the two variants it compares (right).
-    ``sources``: the table of ifenn.studies.error_sources.error_sources."""
+    ``sources``: the table of ifenn.studies.drivers.error_sources.error_sources."""
     runs = list(dict.fromkeys(sources.run))
     fig, axes = plt.subplots(len(runs), 2, figsize=(12, 3.4 * len(runs) + 0.8), squeeze=False,
                              gridspec_kw={"width_ratios": [2, 1]})
@@ -527,7 +176,7 @@ def error_sources_figure(sources, path) -> None:
                  "network, smoothing,\nirreversibility (together: the published step) and single-pass staggering",
                  fontsize=10)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def whole_path_figure(pairs: dict, table, path) -> None:
@@ -535,7 +184,7 @@ def whole_path_figure(pairs: dict, table, path) -> None:
     of FEM and the whole-path run with FEM's peak and phi-threshold increment marked (top), and the
     verified step's work per increment (whole-image CG iterations, and the share of the image
     corrected) against u (bottom). ``pairs``: run -> (FEM history, IFENN history) DataFrames;
-    ``table``: ifenn.studies.whole_path.whole_path_table (the numbers in the titles)."""
+    ``table``: ifenn.studies.drivers.whole_path.whole_path_table (the numbers in the titles)."""
     runs = list(pairs)
     fig, axes = plt.subplots(2, len(runs), figsize=(3.6 * len(runs) + 0.6, 6.4), squeeze=False, sharex="col")
     rows = table.set_index("run")
@@ -568,12 +217,12 @@ def whole_path_figure(pairs: dict, table, path) -> None:
             bottom.legend(fontsize=6, loc="upper left")
     fig.suptitle("Verified IFENN from the first increment against FEM (same scene, same schedule)", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def whole_run_speed_figure(increments, summary, path) -> None:
     """The phase-field step over the whole run, FEM against whole-path IFENN, one process
-    (ifenn.studies.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
+    (ifenn.studies.drivers.whole_run_benchmark). Per run (columns): seconds per phase-field step against u
     (top, log), and the cumulative phase-field time (bottom), FEM's phi-threshold u marked. IFENN
     is drawn once per device it ran on (column ``device``, labelled by name)."""
     runs = list(dict.fromkeys(increments.run))
@@ -611,14 +260,14 @@ def whole_run_speed_figure(increments, summary, path) -> None:
     fig.suptitle("Phase-field step over the whole run, same process, increments interleaved "
                  "(dotted: FEM's phi_max > switch threshold)", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def reference_convergence_figure(curves: dict, table, path) -> None:
     """Per case (columns): the force curves after the peak of FEM at h, FEM on the finer mesh and
     the IFENN runs (top), and each curve's |F| - |F| of the finer FEM over the peak of FEM at h
     (bottom). ``curves``: case -> {label: history} (FEM at h first, the finer FEM second);
-    ``table``: ifenn.studies.reference_convergence.reference_convergence_table."""
+    ``table``: ifenn.studies.tables.reference_convergence.reference_convergence_table."""
     cases = list(curves)
     fig, axes = plt.subplots(2, len(cases), figsize=(4.4 * len(cases) + 0.6, 6.4), squeeze=False, sharex="col")
     for k, case in enumerate(cases):
@@ -653,7 +302,7 @@ def reference_convergence_figure(curves: dict, table, path) -> None:
         bottom.set_ylabel("|F| - |F| finer FEM (% of the FEM peak)" if k == 0 else "")
     fig.suptitle("Which discretisation is right after the peak: IFENN and its FEM reference against a finer FEM", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def adaptive_resolution_figure(curves: dict, table, path) -> None:
@@ -661,7 +310,7 @@ def adaptive_resolution_figure(curves: dict, table, path) -> None:
     adaptive run) and the adaptive runs (top); each curve's |F| - |F| of the reference over its peak
     (middle); the displacement dofs of every run on an adaptive mesh, the reference's included, over
     the finer uniform mesh's (bottom). ``curves``: case -> {label: history} (FEM at h first, the
-    finer reference second); ``table``: ifenn.studies.adaptive_resolution.adaptive_resolution_table."""
+    finer reference second); ``table``: ifenn.studies.tables.adaptive_resolution.adaptive_resolution_table."""
     cases = list(curves)
     fig, axes = plt.subplots(3, len(cases), figsize=(4.8 * len(cases) + 0.6, 8.4), squeeze=False, sharex="col",
                              gridspec_kw={"height_ratios": [2.2, 1.2, 1.0]})
@@ -697,7 +346,7 @@ def adaptive_resolution_figure(curves: dict, table, path) -> None:
         bottom.set_xlabel("u (mm)")
     fig.suptitle("A displacement mesh that follows the crack: accuracy against the converged reference, and its cost", fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> None:
@@ -720,11 +369,11 @@ def adaptive_mesh_figure(states: list[dict], tree_of, path, title: str = "") -> 
         ax.set_yticks([])
     fig.suptitle(title, fontsize=9)
     fig.tight_layout()
-    _save(fig, path)
+    save(fig, path)
 
 
 def network_worth_figure(summary, path, target: float = 1.5) -> None:
-    """What a network is worth to the verified step (ifenn.studies.network_worth), one panel per run:
+    """What a network is worth to the verified step (ifenn.studies.drivers.network_worth), one panel per run:
     the step's time per warm start against the share of the image where the predictor answers,
     with the step without a network and the target (``target`` x faster) as lines. The oracles
     answer exactly and for free: no network asked on a zone can do better than its oracle there."""
@@ -749,4 +398,43 @@ def network_worth_figure(summary, path, target: float = 1.5) -> None:
         ax.set_title(f"{run}, {int(rows.pixels.iloc[0]):,} pixels", fontsize=9)
         ax.legend(fontsize=6.5, loc="upper left")
     fig.suptitle("What a network is worth to the verified step (one core; same certificate for every warm start)", fontsize=10)
-    _save(fig, path)
+    save(fig, path)
+
+
+def specimen_figure(curves: dict, measured, measured_label: str, phi_maps: dict, attrs: dict, scene: dict,
+                    path, title: str = "") -> None:
+    """A specimen against its measurement: left, the force of each run (``curves``: label ->
+    history frame, forces in the scene's units) over the measured curve (``measured``: columns
+    displacement_mm and the force); right, phi of the first run at three load levels (``phi_maps``:
+    increment -> (u, image), ``attrs``: the pixel grid), the scene's cut-outs blanked."""
+    from ifenn import geometry
+    from ifenn.pixels import PixelGrid
+
+    unit = "N" if "thickness" in scene else "N/mm"
+    fig = plt.figure(figsize=(15, 4.2))
+    grid = fig.add_gridspec(1, 4, width_ratios=[1.4, 1, 1, 1])
+    ax = fig.add_subplot(grid[0])
+    force = [c for c in measured.columns if c != "displacement_mm"][0]
+    ax.plot(measured["displacement_mm"], measured[force], "k.", ms=4, label=measured_label)
+    for label, frame in curves.items():
+        ax.plot(frame["u"], frame["reaction_force"], lw=1.4, label=label)
+    ax.set_xlabel("displacement of the load (mm)")
+    ax.set_ylabel(f"force ({unit})")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title)
+    increments = sorted(phi_maps)
+    if increments:
+        pixel_grid = PixelGrid(float(attrs["x0"]), float(attrs["y0"]), float(attrs["h_px"]), int(attrs["nx_px"]), int(attrs["ny_px"]))
+        solid = geometry.solid_pixels(scene, pixel_grid)
+        (x0, x1), (y0, y1) = scene["domain"]["x"], scene["domain"]["y"]
+        picks = [increments[len(increments) // 3], increments[2 * len(increments) // 3], increments[-1]]
+        for k, increment in enumerate(picks):
+            u, phi = phi_maps[increment]
+            axis = fig.add_subplot(grid[k + 1])
+            image = axis.imshow(np.where(solid, phi, np.nan), origin="lower", extent=[x0, x1, y0, y1], vmin=0, vmax=1, cmap="magma_r")
+            axis.set_title(f"phi at u = {u:.4g} mm", fontsize=9)
+            axis.set_xticks([])
+            axis.set_yticks([])
+        fig.colorbar(image, ax=axis, fraction=0.046)
+    save(fig, path)

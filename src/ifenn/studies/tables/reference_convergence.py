@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history
-from ifenn.studies.metrics import fine_label
+from ifenn.studies.tables.metrics import fine_label
 
 
 def _curve(history: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:

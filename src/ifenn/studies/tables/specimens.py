@@ -6,14 +6,14 @@ force, the displacement at the peak and the work of the load up to the end of th
 two curves, each beside the curve's own and as a ratio to it. The work is the area under the
 force-displacement curve (trapezoids): once the specimen is cut it is the energy the fracture
 dissipated, so it compares the two answers without depending on where the drop falls
-(:func:`ifenn.studies.metrics.work_of_load`).
+(:func:`ifenn.studies.tables.metrics.work_of_load`).
 """
 
 from __future__ import annotations
 
 import pandas as pd
 
-from ifenn.studies.metrics import peak, work_of_load, work_rel_error
+from ifenn.studies.tables.metrics import peak, work_of_load, work_rel_error
 
 TABLE_COLUMNS = ["run", "peak_force", "u_peak", "work", "u_end", "peak_ratio", "u_peak_ratio", "work_ratio"]
 

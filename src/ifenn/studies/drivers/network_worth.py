@@ -155,32 +155,26 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
     ``variant`` on the recorded sequence (``exact``: the exact pixel solutions, for the oracles;
     ``change_net``: the trained :class:`ifenn.network.change_net.ChangeNet`). ``verified_phis``: a
     list that receives the verified phi of every step."""
-    from ifenn.hybrid.runs import network_inference, slit_cuts
-    from ifenn.hybrid.verification import VerifiedInference
-    from ifenn.pixel_equation.numpy_backend import PixelEquation
+    from ifenn.hybrid.runs import network_inference, slit_cuts, verified_step
 
     verification = spec["verification"]
     Gc, lc = spec["material"]["Gc"], spec["material"]["lc"]
-    equation = PixelEquation(Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
-    settings = (verification["tolerance"], verification["margin_lc"], verification["max_rounds"], verification["solve_fraction"])
     if variant == "no network":
-        step = VerifiedInference(None, equation, *settings, "previous", spec["history_cap"], verification.get("cap_history", False))
+        step = verified_step(spec, h_px, None, "previous")
     elif variant.startswith("paper's network"):
         if variant == "paper's network":
             run = {**spec, "process_zone": {**spec["process_zone"], "tolerance": verification["network_tolerance"]}}
         else:
             run = {**spec, "inference": "full", "evaluation": "orbit"}
-        network = network_inference(run, model_path, h_px, start.shape, "cpu")
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
-    elif variant == "change network":
-        from ifenn.network.change_net import ChangeNetWarmStart
+        step = verified_step(spec, h_px, network_inference(run, model_path, h_px, start.shape, "cpu"), "increment")
+    elif variant in ("change network", "extrapolation"):
+        if variant == "change network":
+            from ifenn.network.change_net import ChangeNetWarmStart
 
-        network = ChangeNetWarmStart(change_net, Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
-        network.verified = step
-    elif variant == "extrapolation":
-        network = _Extrapolation()
-        step = VerifiedInference(network, equation, *settings, "increment", spec["history_cap"], verification.get("cap_history", False))
+            network = ChangeNetWarmStart(change_net, Gc, lc, h_px, spec["pixel_padding"], slit_cuts(spec))
+        else:
+            network = _Extrapolation()
+        step = verified_step(spec, h_px, network, "increment")
         network.verified = step
     else:
         zone_of = None
@@ -190,8 +184,7 @@ def replay(spec: dict, model_path: Path, h_px: float, start: np.ndarray, images:
             radius = 2 * reach + (int(spec["smoothing_truncate"] * sigma + 0.5) if sigma else 0)
             tolerance = variant.removeprefix("oracle in the zone").strip()
             zone_of = _Zone(float(tolerance) if tolerance else verification["network_tolerance"], Gc / lc, radius)
-        step = VerifiedInference(_Oracle(exact, zone_of), equation, *settings, "network", spec["history_cap"],
-                                 verification.get("cap_history", False))
+        step = verified_step(spec, h_px, _Oracle(exact, zone_of), "network")
     step.start_from(start)
     rows = []
     for k, image in enumerate(images):

@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from ifenn.run_files import read_history, read_run_wall, read_spec
-from ifenn.studies.metrics import fine_label, peak, post_peak_rms, work_rel_error
+from ifenn.studies.tables.metrics import fine_label, peak, post_peak_rms, work_rel_error
 
 TARGETS = {"post_peak_rms_pct": 2.0, "peak_error_pct": 1.0, "u_peak_error_pct": 2.0, "work_error_pct": 2.0, "dofs_fraction": 0.30}
 

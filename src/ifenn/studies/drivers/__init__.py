@@ -1,0 +1,1 @@
+"""Studies that run solvers themselves: the stability sweep, the error split, the whole-path replay, what a network is worth, the benchmarks."""
