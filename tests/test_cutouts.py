@@ -309,3 +309,26 @@ def test_patch_test_on_an_adaptive_mesh_with_a_cut_out():
     assert_uniaxial_plane_strain(problem, 1e-3, 0.75)
     psi = problem.tensile_energy()
     assert (psi[removed] == 0).all() and np.ptp(psi[~removed]) < 1e-9 * psi.max()
+
+
+def test_the_l_panel_band_holds_its_own_test_and_refuses_twice_its_force(paper_config):
+    """Winkler's scatter band (data/): its edges ordered, its peaks 6.7 and 7.6 kN at 0.2 mm; test
+    series A (data/) peaks inside it and lies in it nearly everywhere; a curve twice as strong is out."""
+    import pandas as pd
+
+    from ifenn.config import REPO
+    from ifenn.studies.tables.specimens import in_band, specimen_table
+
+    entry = paper_config["specimens"]["l-panel"]
+    band = pd.read_csv(REPO / entry["band"]["file"], comment="#")
+    assert (band.load_lower_N <= band.load_upper_N).all()
+    assert band.load_lower_N.max() == pytest.approx(6700) and band.load_upper_N.max() == pytest.approx(7600)
+    assert band.displacement_mm[band.load_upper_N.idxmax()] == pytest.approx(0.2)
+    series = pd.read_csv(REPO / entry["measured"]["file"], comment="#")
+    own = in_band(series.displacement_mm, series.load_N, band)
+    assert own["peak_in_band"] and own["in_band_fraction"] >= 0.95
+    twice = in_band(series.displacement_mm, 2 * series.load_N, band)
+    assert not twice["peak_in_band"] and twice["in_band_fraction"] < 0.1
+    table = specimen_table({"twice": pd.DataFrame({"u": series.displacement_mm, "reaction_force": 2 * series.load_N})},
+                           series, band).set_index("run")
+    assert table.loc["measured", "peak_in_band"] and not table.loc["twice", "peak_in_band"]

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -54,7 +55,8 @@ def test_quick_profile_runs_end_to_end(quick_workflow):
     assert set(timing.method) == {"fem", "ifenn"}
     for figure in ("training/training_data.png", "training/training.png", "paper/views_3d.png", "paper/mesh_study.png",
                    "paper/phase_field_time.png", "paper/snt1-I_comparison.png", "paper/adnt_comparison.png",
-                   "speed_accuracy.png", "stability_map.png", "specimens/l-panel.png",
+                   "speed_accuracy/snt1.png", "speed_accuracy/three-point-bending.png", "stability_map.png",
+                   "specimens/l-panel.png",
                    "specimens/three-point-bending.png"):
         assert (results / "figures" / figure).stat().st_size > 10_000, figure
     # the field's L-panel (a cut-out, a load on the cut-out's edge, plane stress, 100 mm thick): its
@@ -133,6 +135,15 @@ def test_quick_profile_speed_accuracy_stability_benchmark(quick_workflow):
     table = pd.read_csv(results / "tables" / "speed_accuracy.csv")
     assert {"snt1", "sdnt", "l-panel", "three-point-bending"} == set(table.scene) and table.is_reference.sum() == 4
     assert table.pareto_wall_s.any() and (table.force_l2_rel_error[~table.is_reference] > 0).all()
+    # what the charts mark: per scene one reference (the is_reference row) and one baseline, a FEM run whose
+    # wall the table divides by; the combined runs the config names (snt1, sdnt; none on the quick specimens)
+    assert (table.role.fillna("") == "reference").equals(table.is_reference)
+    for scene, rows in table.groupby("scene"):
+        base = rows[rows.role == "baseline"]
+        assert len(base) == 1 and base.method.iloc[0] == "fem", scene
+        assert np.allclose(rows.wall_vs_baseline, rows.wall_s / base.wall_s.iloc[0]), scene
+    assert set(table.run[table.role == "combined"]) == {"snt1-A-conv-adaptive", "snt1-A-conv-adaptive-verified",
+                                                        "sdnt-A-conv-adaptive", "sdnt-A-conv-adaptive-verified"}
     # the work of the load's own front: per scene, the fastest run is on it, and no run on it is
     # beaten in both wall time and |work error| by another
     for _, rows in table[~table.is_reference].groupby("scene"):

@@ -80,6 +80,8 @@ rule specimen_figure:
         adaptive=lambda w: [f"results/adaptive/{run}/history.csv" for run in config["specimens"][w.specimen].get("adaptive_runs", [])],
         fields=lambda w: f"results/fem/{config['specimens'][w.specimen]['fem_runs'][0]}/fields.h5",
         measured=lambda w: os.path.join(workflow.basedir, config["specimens"][w.specimen]["measured"]["file"]),
+        band=lambda w: [os.path.join(workflow.basedir, config["specimens"][w.specimen]["band"]["file"])]
+                       if "band" in config["specimens"][w.specimen] else [],
     output:
         figure=report("results/figures/specimens/{specimen}.png", caption="../report/specimen.rst", category="The field's specimens"),
         table="results/tables/specimens/{specimen}.csv",
@@ -88,6 +90,7 @@ rule specimen_figure:
         ifenn_runs=lambda w: config["specimens"][w.specimen].get("ifenn_runs", []),
         adaptive_runs=lambda w: config["specimens"][w.specimen].get("adaptive_runs", []),
         label=lambda w: config["specimens"][w.specimen]["measured"]["label"],
+        band_label=lambda w: config["specimens"][w.specimen].get("band", {}).get("label", ""),
         factors=lambda w: specimen_factors(w.specimen),
         scene=lambda w: config["scenes"][config["fem_runs"][config["specimens"][w.specimen]["fem_runs"][0]]["scene"]],
     conda:

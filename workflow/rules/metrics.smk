@@ -62,7 +62,8 @@ rule speed_accuracy:
         benchmark="results/benchmarks/phase_field_speed.csv",
     output:
         table=report("results/tables/speed_accuracy.csv", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
-        figure=report("results/figures/speed_accuracy.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy"),
+        figures=[report(f"results/figures/speed_accuracy/{scene}.png", caption="../report/speed_accuracy.rst", category="Speed and accuracy")
+                 for scene in config.get("speed_accuracy", {})],
     params:
         setups=speed_accuracy_setups(config),
         run_dirs=lambda w: speed_accuracy_dirs(),

@@ -19,8 +19,9 @@ for (label, path), factor in zip(labelled, params.factors, strict=True):
     frame["reaction_force"] *= factor
     curves[label if factor == 1 else f"{label} (x{factor})"] = frame
 measured = pd.read_csv(inputs.measured, comment="#")
+band = pd.read_csv(inputs.band[0], comment="#") if inputs.band else None
 maps, attrs = read_phase_field_maps(inputs.fields)
 specimen_figure(curves, measured, params.label, maps, attrs, params.scene, snakemake.output.figure,
-                title=snakemake.wildcards.specimen)
+                title=snakemake.wildcards.specimen, band=band, band_label=params.band_label)
 with atomic_path(snakemake.output.table) as tmp:
-    specimen_table(curves, measured).to_csv(tmp, index=False, float_format="%.9g")
+    specimen_table(curves, measured, band).to_csv(tmp, index=False, float_format="%.9g")

@@ -1,4 +1,4 @@
-"""Adapter: run histories (+ the phase-field benchmark, quoted in the figure) -> ifenn.studies.tables.speed_accuracy table and figure."""
+"""Adapter: run histories (+ the phase-field benchmark, quoted in the figures) -> ifenn.studies.tables.speed_accuracy table and a figure per scene."""
 import pandas as pd
 
 from ifenn.io import log_to, write_csv
@@ -9,4 +9,6 @@ snakemake = snakemake  # noqa: F821 (injected by Snakemake)
 log_to(snakemake.log[0])
 table = speed_accuracy_table(snakemake.params.setups, snakemake.params.run_dirs)
 write_csv(snakemake.output.table, table)
-speed_accuracy_figure(table, snakemake.output.figure, pd.read_csv(snakemake.input.benchmark))
+benchmark = pd.read_csv(snakemake.input.benchmark)
+for scene, path in zip(snakemake.params.setups, snakemake.output.figures, strict=True):   # one figure per scene, in the config's order
+    speed_accuracy_figure(table, scene, path, benchmark)

@@ -153,6 +153,14 @@ def _speed_accuracy_problems(config: dict) -> list[str]:
             for run in names:
                 if run not in config.get(pool, {}):
                     problems.append(f"config key 'speed_accuracy.{scene}.{key}': '{run}' is not in {pool}; allowed: {sorted(config.get(pool, {}))}")
+        listed = [run for method in SPEED_ACCURACY_METHODS for run in setup.get(method, [])]
+        if "baseline" in setup and setup["baseline"] not in setup.get("fem", []):
+            problems.append(f"config key 'speed_accuracy.{scene}.baseline': '{setup['baseline']}' must be one of the scene's "
+                            f"fem runs (the FEM run to beat); listed: {setup.get('fem', [])}")
+        for k, run in enumerate(setup.get("combined", [])):
+            if run not in listed:
+                problems.append(f"config key 'speed_accuracy.{scene}.combined[{k}]': '{run}' is not a point of the scene's "
+                                f"chart; allowed: {listed}")
     return problems
 
 
@@ -216,8 +224,9 @@ def _specimen_problems(config: dict) -> list[str]:
             if run not in config.get("adaptive_runs", {}):
                 problems.append(f"config key 'specimens.{name}.adaptive_runs': '{run}' is not an adaptive run; "
                                 f"allowed: {sorted(config.get('adaptive_runs', {}))}")
-        if not (REPO / specimen["measured"]["file"]).is_file():
-            problems.append(f"config key 'specimens.{name}.measured.file': no file {specimen['measured']['file']} in the repository")
+        for key in ("measured", "band"):
+            if key in specimen and not (REPO / specimen[key]["file"]).is_file():
+                problems.append(f"config key 'specimens.{name}.{key}.file': no file {specimen[key]['file']} in the repository")
     return problems
 
 

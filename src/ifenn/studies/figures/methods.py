@@ -47,83 +47,95 @@ def stability_map_figure(table, path) -> None:
     save(fig, path)
 
 
-def speed_accuracy_figure(table, path, benchmark=None) -> None:
-    """Per scene (rows): force-curve error against wall time of the whole run (first panel) and of
-    the propagation stage (second), and the error in the work of the load (the dissipated energy
-    once the specimen is cut, which does not hinge on where the drop falls) against the whole run's
-    wall (third); log-log, one marker per method family (FEM circles, IFENN squares, whole-path
-    IFENN diamonds, adaptive-mesh runs triangles; hollow: converged staggering; colour: the load
-    schedule), the Pareto front of each panel as a line. Only the front and the reference (drawn
-    at the bottom edge) are labelled by name; every other point carries a number, and the table on
-    the right lists them all with their wall time, error, work of the load and u at the half drop.
-    ``benchmark`` (optional, the phase_field_speed table) puts its same-core speed-ups in the title."""
+def _label_column(ax, points: list[tuple[float, float, str, bool]], spacing: float = 0.045) -> None:
+    """Name ``points`` ((x, y, name, bold) in data coordinates) in a column right of ``ax``, each
+    at its point's height where it can be and moved apart where names would overlap, with a thin
+    line to its point."""
+    to_axes = ax.transAxes.inverted()
+    wanted = sorted(((float(to_axes.transform(ax.transData.transform((x, y)))[1]), x, y, name, bold)
+                     for x, y, name, bold in points), reverse=True)
+    heights, top = [], 1.0
+    for h, *_ in wanted:   # top down, no closer than spacing, then the column pushed up from the bottom if it overran
+        top = min(h, top - spacing if heights else 1.0)
+        heights.append(top)
+    overrun = min(0.0, heights[-1]) if heights else 0.0
+    heights = [h - overrun for h in heights]
+    for h in range(len(heights) - 2, -1, -1):
+        heights[h] = max(heights[h], heights[h + 1] + spacing)
+    for height, (_, x, y, name, bold) in zip(heights, wanted, strict=True):
+        ax.annotate(name, (x, y), xytext=(1.02, height), textcoords="axes fraction", fontsize=8, va="center",
+                    fontweight="bold" if bold else "normal", annotation_clip=False,
+                    arrowprops={"arrowstyle": "-", "color": "grey", "lw": 0.4, "alpha": 0.7, "shrinkA": 0, "shrinkB": 4})
+
+
+def speed_accuracy_figure(table, scene: str, path, benchmark=None) -> None:
+    """One scene's speed against accuracy: the force curve's L2 error (left) and the error in the work
+    of the load (right; the dissipated energy once the specimen is cut, which does not hinge on where
+    the drop falls) against the whole run's wall, log-log. One marker per method family (FEM circles,
+    IFENN squares, whole-path IFENN diamonds, adaptive-mesh runs triangles; hollow: converged
+    staggering; colour: the load schedule), each panel's Pareto front a step line through the
+    black-outlined points. Named: the front's runs, the reference (drawn at the bottom edge), the
+    baseline (ringed: FEM as published) and the combined runs (starred); every point with its numbers
+    is a row of speed_accuracy.csv. ``benchmark`` (the phase_field_speed table) adds its same-core
+    ratio of the IFENN phase-field step to FEM's under the panels."""
     import textwrap
 
     from ifenn.studies.tables.speed_accuracy import PARETO
 
-    scenes = list(dict.fromkeys(table.scene))
-    fig, axes = plt.subplots(len(scenes), 4, figsize=(25, 6.6 * len(scenes)), squeeze=False,
-                             gridspec_kw={"width_ratios": [1, 1, 1, 1.05]})
-    schedules = list(dict.fromkeys(table.schedule))
+    rows = table[table.scene == scene].reset_index(drop=True)
+    schedules = list(dict.fromkeys(table.schedule))   # the same colour for a schedule in every scene's figure
     colours = dict(zip(schedules, plt.cm.tab10(np.arange(len(schedules)) % 10), strict=True))
-    titles = {"wall_s": "whole run", "propagation_wall_s": "propagation stage"}
-    labels = {"force_l2_rel_error": "force-curve L2 error (%) vs the converged reference",
-              "work_abs_error": "|work of the load error| (%) vs the converged reference"}
-    for row_axes, scene in zip(axes, scenes, strict=True):
-        rows = table[table.scene == scene].reset_index(drop=True)
-        for ax, (pareto, column, error_column) in zip(row_axes[:3], PARETO, strict=True):
-            errors = rows[error_column][~rows.is_reference]
-            floor = 0.5 * errors[errors > 0].min() if (errors > 0).any() else 1e-6
-            for k, r in rows.iterrows():
-                error = max(floor, r[error_column]) if not r.is_reference else floor
-                colour = colours[r.schedule]
-                marker = {"fem": "o", "adaptive": "^"}.get(r.method, "D" if r.variant.endswith("whole path") else "s")
-                ax.scatter(r[column], 100 * error, marker=marker, s=60,
-                           facecolor="white" if r.converged else colour,
-                           edgecolor="k" if r[pareto] else colour, linewidth=1.8, zorder=3)
-                named = r.is_reference or r[pareto]
-                ax.annotate(r.run + (" (reference)" if r.is_reference else "") if named else str(k + 1), (r[column], 100 * error),
-                            fontsize=7 if named else 6, xytext=(4, 3), textcoords="offset points",
-                            fontweight="bold" if named else "normal")
-            front = rows[rows[pareto]].sort_values(column)
-            ax.step(front[column], 100 * np.maximum(front[error_column], floor), where="post", color="k", lw=1, alpha=0.6,
-                    label="Pareto front")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_xlabel(f"wall time, {titles[column]} (s, sum of increments)")
-            ax.set_ylabel(labels[error_column])
-            what = "work of the load" if error_column == "work_abs_error" else "force curve"
-            ax.set_title("\n".join(textwrap.wrap(f"{scene}, {what}, {titles[column]}. Pareto front (no run both faster and more "
-                                                 "accurate): " + ", ".join(front.run), 62)), fontsize=8)
-            ax.grid(True, which="both", alpha=0.3)
-        lines = [f"{'':>3} {'run':<34} {'wall s':>7} {'L2 %':>6} {'work %':>7} {'u half %':>8}"]
-        for k, r in rows.iterrows():
-            work = f"{100 * r.work_rel_error:+.2g}" if np.isfinite(r.work_rel_error) else "-"
-            half = f"{100 * r.u_half_drop_rel_error:+.2g}" if np.isfinite(r.u_half_drop_rel_error) else "-"
-            lines.append(f"{k + 1:>3} {r.run[:34]:<34} {r.wall_s:>7.3g} {100 * r.force_l2_rel_error:>6.2g} {work:>7} {half:>8}")
-        row_axes[3].axis("off")
-        row_axes[3].text(0.0, 1.0, "\n".join(lines), family="monospace", fontsize=6, va="top", transform=row_axes[3].transAxes)
-        row_axes[3].set_title(f"{scene}: every point (reference {rows.reference.iloc[0]}; u half: u where the force "
-                              "has dropped to half its peak)", fontsize=8)
-        handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
-                   plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
-                   plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path (from the first increment)"),
-                   plt.Line2D([], [], marker="^", ls="", color="grey", label="adaptive mesh (FEM or verified IFENN)"),
-                   plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
-                   plt.Line2D([], [], color="k", label="Pareto front (black outline)")]
-        handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()]
-        if scene == scenes[0]:   # once, under the title (on a chart it would cover points)
-            fig.legend(handles=handles, fontsize=7, loc="upper center", ncol=7, bbox_to_anchor=(0.5, 0.985 - 0.004 * len(scenes)))
-    title = "Speed against accuracy on a CPU, one thread per run (wall times under the load of the runs made alongside)."
+    fig, axes = plt.subplots(2, 1, figsize=(8.5, 11), gridspec_kw={"hspace": 0.3})   # a page's width: stacked
+    panels = {"pareto_wall_s": "force curve: L2 error (%)", "pareto_work_wall_s": "work of the load: |error| (%)"}
+    for ax, (pareto, column, error_column) in zip(axes, [p for p in PARETO if p[0] in panels], strict=True):
+        errors = rows[error_column][~rows.is_reference]
+        floor = 0.5 * errors[errors > 0].min() if (errors > 0).any() else 1e-6
+        labels = []
+        for _, r in rows.iterrows():
+            x, y = r[column], 100 * (floor if r.is_reference else max(floor, r[error_column]))
+            colour = colours[r.schedule]
+            marker = {"fem": "o", "adaptive": "^"}.get(r.method, "D" if r.variant.endswith("whole path") else "s")
+            ax.scatter(x, y, marker=marker, s=50, facecolor="white" if r.converged else colour,
+                       edgecolor="k" if r[pareto] else colour, linewidth=1.6, zorder=3)
+            if r.role == "baseline":
+                ax.scatter(x, y, marker="o", s=320, facecolor="none", edgecolor="tab:red", linewidth=1.5, zorder=2)
+            elif r.role == "combined":
+                ax.scatter(x, y, marker="*", s=380, facecolor="none", edgecolor="tab:green", linewidth=1.2, zorder=2)
+            if r.role or r[pareto]:
+                labels.append((x, y, r.run + {"reference": " (reference)", "baseline": " (FEM as published)"}.get(r.role, ""),
+                               bool(r.role)))
+        front = rows[rows[pareto]].sort_values(column)
+        ax.step(front[column], 100 * np.maximum(front[error_column], floor), where="post", color="k", lw=1, alpha=0.6)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        _label_column(ax, labels)
+        ax.set_xlabel("wall time of the whole run (s, sum of its increments)", fontsize=9)
+        ax.set_ylabel(panels[pareto], fontsize=9)
+        ax.set_title(panels[pareto].split(":")[0] + f" against {rows.reference.iloc[0]}", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    handles = [plt.Line2D([], [], marker="o", ls="", color="grey", label="FEM"),
+               plt.Line2D([], [], marker="s", ls="", color="grey", label="IFENN"),
+               plt.Line2D([], [], marker="D", ls="", color="grey", label="IFENN, whole path"),
+               plt.Line2D([], [], marker="^", ls="", color="grey", label="adaptive mesh"),
+               plt.Line2D([], [], marker="o", ls="", mfc="white", mec="grey", label="converged staggering (hollow)"),
+               plt.Line2D([], [], color="k", label="Pareto front (black outline)"),
+               plt.Line2D([], [], marker="o", ls="", mfc="none", mec="tab:red", ms=13, label="FEM as published"),
+               plt.Line2D([], [], marker="*", ls="", mfc="none", mec="tab:green", ms=15, label="combined run")]
+    handles += [plt.Line2D([], [], marker="o", ls="", color=c, label=f"schedule {v}") for v, c in colours.items()
+                if v in set(rows.schedule)]
+    fig.legend(handles=handles, fontsize=8, loc="lower center", ncol=4, frameon=False, bbox_to_anchor=(0.5, 0.045))
+    note = "Wall times on a CPU, one thread a run, two runs at a time on a 2-core machine."
     if benchmark is not None and len(benchmark):
-        names = {"ifenn_full_convolution": "full image, convolutions (the paper)", "ifenn_full": "full image, orbit evaluation",
+        names = {"ifenn_full_convolution": "the published network step (full image, convolutions)", "ifenn_full": "full image, orbit",
                  "ifenn_process_zone": "process zone"}
-        ranges = [f"{label}{'' if device == 'cpu' else f' on {device}'} {g.min():.2g}-{g.max():.2g}x"
+        ratios = [f"{label}{'' if device == 'cpu' else f' on {device}'} {g.min():.2g}-{g.max():.2g}x"
                   for device in dict.fromkeys(benchmark.device) for method, label in names.items()
                   if len(g := benchmark[(benchmark.method == method) & (benchmark.device == device)].phase_field_speedup_vs_fem)]
-        title += ("\nIFENN phase-field step against the FEM one it replaces, same core (phase_field_speed.csv, "
-                  f"{'/'.join(dict.fromkeys(benchmark.run))}; >1 = faster): " + ", ".join(ranges) + ".")
-    fig.suptitle(title, fontsize=9)
+        note += (" The phase-field step against the FEM step it replaces, same core (phase_field_speed.csv; >1 faster): "
+                 + ", ".join(ratios) + ".")
+    fig.text(0.5, 0.005, "\n".join(textwrap.wrap(note, 120)), ha="center", va="bottom", fontsize=8)
+    fig.suptitle(f"{scene}: speed against accuracy", fontsize=12)
+    fig.subplots_adjust(left=0.1, right=0.66, top=0.94, bottom=0.17)
     save(fig, path)
 
 
@@ -402,10 +414,11 @@ def network_worth_figure(summary, path, target: float = 1.5) -> None:
 
 
 def specimen_figure(curves: dict, measured, measured_label: str, phi_maps: dict, attrs: dict, scene: dict,
-                    path, title: str = "") -> None:
+                    path, title: str = "", band=None, band_label: str = "") -> None:
     """A specimen against its measurement: left, the force of each run (``curves``: label ->
     history frame, forces in the scene's units) over the measured curve (``measured``: columns
-    displacement_mm and the force); right, phi of the first run at three load levels (``phi_maps``:
+    displacement_mm and the force) and, shaded, its scatter ``band`` (displacement_mm, the lower and
+    the upper edge's force); right, phi of the first run at three load levels (``phi_maps``:
     increment -> (u, image), ``attrs``: the pixel grid), the scene's cut-outs blanked."""
     from ifenn import geometry
     from ifenn.pixels import PixelGrid
@@ -415,6 +428,8 @@ def specimen_figure(curves: dict, measured, measured_label: str, phi_maps: dict,
     grid = fig.add_gridspec(1, 4, width_ratios=[1.4, 1, 1, 1])
     ax = fig.add_subplot(grid[0])
     force = [c for c in measured.columns if c != "displacement_mm"][0]
+    if band is not None:
+        ax.fill_between(band.iloc[:, 0], band.iloc[:, 1], band.iloc[:, 2], color="0.85", label=band_label, zorder=0)
     ax.plot(measured["displacement_mm"], measured[force], "k.", ms=4, label=measured_label)
     for label, frame in curves.items():
         ax.plot(frame["u"], frame["reaction_force"], lw=1.4, label=label)

@@ -20,7 +20,9 @@ the switch-over (the first increment with phi_max > switch_phi_max; for a whole-
 which computes every increment (its variant ends in 'whole path'), the first of its own increments with
 phi_max > switch_phi_max, as for a FEM run). Wall times depend on the
 load of the machine while each run was made; 'displacement_solves' is the load-independent
-cost (each staggered iteration is one displacement solve and one phase-field step).
+cost (each staggered iteration is one displacement solve and one phase-field step). ``role``: what
+the chart marks a run as (the config's ``reference``, ``baseline`` and ``combined``), and
+``wall_vs_baseline`` its wall over the baseline's.
 """
 
 from __future__ import annotations
@@ -50,6 +52,15 @@ def _label(method: str, spec: dict) -> str:
     if spec.get("switch_over") == "start":
         what += ", whole path"
     return f"IFENN {spec['schedule_name']}, {stagger}, {what}"
+
+
+def _role(setup: dict, method: str, run: str) -> str:
+    """What the chart marks a run as: 'reference', 'baseline' (a FEM run: the one to beat), 'combined', or ''."""
+    if method == setup.get("reference_method", "fem") and run == setup["reference"]:
+        return "reference"
+    if method == "fem" and run == setup.get("baseline"):
+        return "baseline"
+    return "combined" if run in setup.get("combined", []) else ""
 
 
 def _drop_and_work(u, force, ref_u, ref_force, ref_half: float) -> dict:
@@ -106,9 +117,16 @@ def speed_accuracy_table(setups: dict, run_dirs: dict[str, dict[str, str | Path]
                     "peak_force_rel_error": float(history.reaction_force.max() / ref.reaction_force.max() - 1.0),
                     **_drop_and_work(history.u.to_numpy(), history.reaction_force.to_numpy(), ref_u, ref_force, ref_half),
                     "reference": setup["reference"], "is_reference": method == reference_method and run == setup["reference"],
+                    "role": _role(setup, method, run),
                 })
     table = pd.DataFrame(rows)
     table["work_abs_error"] = table.work_rel_error.abs()
+    # the wall against the scene's baseline (FEM as published), where the config names one
+    table["wall_vs_baseline"] = np.nan
+    for scene in table.scene.unique():
+        base = table[(table.scene == scene) & (table.role == "baseline")]
+        if len(base):
+            table.loc[table.scene == scene, "wall_vs_baseline"] = table.wall_s[table.scene == scene] / float(base.wall_s.iloc[0])
     # per scene, the runs no other beats in both cost and error: force curve against the whole run's
     # and the propagation stage's wall, work of the load against the whole run's
     for name, column, error in PARETO:

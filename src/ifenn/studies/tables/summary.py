@@ -50,9 +50,11 @@ SECTIONS: dict[str, Section] = {
     "speed_accuracy": _section(
         "Speed against accuracy",
         "Every method variant's wall time against its force-curve error versus the converged reference "
-        "(finest schedule, converged staggering, adaptive mesh one level finer); `pareto_wall_s` marks the front.",
-        "scene run variant schedule converged wall_s force_l2_rel_error post_peak_rms peak_force_rel_error "
-        "is_reference pareto_wall_s"),
+        "(finest schedule, converged staggering, adaptive mesh one level finer); `pareto_wall_s` marks the front, "
+        "`role` the reference, FEM as published (`baseline`) and the combined runs, `wall_vs_baseline` the wall "
+        "over the baseline's.",
+        "scene run variant schedule converged role wall_s wall_vs_baseline force_l2_rel_error work_rel_error post_peak_rms "
+        "peak_force_rel_error pareto_wall_s"),
     "adaptive_resolution": _section(
         "The displacement mesh that follows the crack",
         "Adaptive runs against the finer reference of the same specimen: peak and post-peak error (%), wall "
