@@ -2,7 +2,7 @@
 
 Layout, one room per concern:
 
-- top level: ``config`` (validated configuration, run specs), ``io`` (atomic files, logs,
+- top level: ``config`` (validated configuration, run specs), ``specs`` (the run specs as types), ``io`` (atomic files, logs,
   progress), ``run_files`` (the formats of a run directory), ``pixels`` (the Gauss-point pixel
   grid the layers below share), ``materials`` (a scene's material, lc/h), ``geometry``;
 - ``models``: the phase-field model (degradation, crack density, driving force, forms);
