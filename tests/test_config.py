@@ -125,13 +125,14 @@ def test_bad_switch_over_is_refused_naming_the_key(paper_config, mutate, expecte
 
 
 def test_switch_over_in_the_specs(paper_config):
-    """The published runs' specs carry no switch-over keys (the paper's threshold, unchanged
-    specs and hashes); whole-path runs say 'start'; a given increment is saved by the FEM run."""
+    """Every spec says its switch-over (the published runs the paper's threshold); whole-path runs
+    say 'start'; a given increment is saved by the FEM run."""
     from ifenn.config import ifenn_run_spec
 
-    assert "switch_over" not in ifenn_run_spec(paper_config, "snt1-II-verified")
+    published = ifenn_run_spec(paper_config, "snt1-II-verified")
+    assert published["switch_over"] == "phi_threshold" and published["switch_increment"] is None
     whole = ifenn_run_spec(paper_config, "snt1-II-whole")
-    assert whole["switch_over"] == "start" and "switch_increment" not in whole and whole["verification"]["enabled"]
+    assert whole["switch_over"] == "start" and whole["switch_increment"] is None and whole["verification"]["enabled"]
     assert whole["load"] == fem_run_spec(paper_config, "snt1-II")["load"]
     config = copy.deepcopy(paper_config)
     config["ifenn_runs"]["snt1-I-at-123"] = {"fem_run": "snt1-I", "switch_over": "increment", "switch_increment": 123}
@@ -188,7 +189,7 @@ def test_an_adaptive_run_may_take_its_own_schedule_and_staggering(paper_config):
     from ifenn.config import adaptive_run_spec
 
     spec = adaptive_run_spec(paper_config, "l-panel-A-conv-adaptive-verified")
-    assert spec["schedule_name"] == "l-panel-A" and "load" not in spec and spec["adaptive"]["u_end"] == 1.0
+    assert spec["schedule_name"] == "l-panel-A" and spec["load"] is None and spec["adaptive"]["u_end"] == 1.0
     assert spec["stagger_max_iterations"] == 50 and spec["verification"]["enabled"] and spec["scene_name"] == "l-panel"
     config = copy.deepcopy(paper_config)
     config["adaptive_runs"]["l-panel-A-conv-adaptive"]["schedule"] = "l-panel-Z"

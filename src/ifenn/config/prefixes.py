@@ -13,13 +13,13 @@ PREFIX_FREE_KEYS = ("name", "fem_run", "schedule_name", "load", "save_fields")
 def _longest_shared_prefix(spec: dict, others: dict[str, dict]) -> dict | None:
     """The run of ``others`` (name -> spec) whose saved state ``spec`` can start from
     (:func:`shared_prefix`): {'run', 'increment', 'spec_hash'}, or None."""
-    if "load" not in spec:
+    if spec.get("load") is None:
         return None
     rest = {k: v for k, v in spec.items() if k not in PREFIX_FREE_KEYS}
     best = None
     for other in sorted(others):
         candidate = others[other]
-        if other == spec["name"] or "load" not in candidate or (len(candidate["load"]), other) >= (len(spec["load"]), spec["name"]):
+        if other == spec["name"] or candidate.get("load") is None or (len(candidate["load"]), other) >= (len(spec["load"]), spec["name"]):
             continue
         if {k: v for k, v in candidate.items() if k not in PREFIX_FREE_KEYS} != rest:
             continue

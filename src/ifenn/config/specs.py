@@ -6,6 +6,13 @@ from __future__ import annotations
 
 from ifenn.config.loading import ConfigError, deep_merge
 from ifenn.materials import scene_material
+from ifenn.specs import spec_dict, typed_spec
+
+
+def whole(kind: str, spec: dict) -> dict:
+    """``spec`` read into its type (:mod:`ifenn.specs`: an unknown key is refused) and written back
+    whole, every default explicit, so that spec.json and its hash say everything the run used."""
+    return spec_dict(typed_spec(kind, spec))
 
 SWITCH_OVER = ("phi_threshold", "increment", "start")
 
@@ -80,7 +87,7 @@ def training_spec(config: dict) -> dict:
     """What the training rules need: the PICNN section, material and the training run's scene
     (its slits cut the loss's stencil, as in every pixel operator)."""
     scene = config["scenes"][config["fem_runs"][config["picnn"]["training_run"]]["scene"]]
-    return {**config["picnn"], "material": scene_material(config["material"], scene), "scene": scene}
+    return whole("training", {**config["picnn"], "material": scene_material(config["material"], scene), "scene": scene})
 
 
 def fem_run_spec(config: dict, run: str) -> dict:
@@ -108,7 +115,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
     # fixed schedules: every load value (and the saved increments) in the spec; adaptive
     # ones: the controller's settings, and fields saved every save_every increments
     loads = {"load": load_values(schedule)} if n_inc is not None else {"adaptive": schedule["adaptive"], "save_every": solver["save_every"]}
-    return {
+    return whole("fem", {
         "name": run,
         "scene_name": entry["scene"],
         "scene": config["scenes"][entry["scene"]],
@@ -123,7 +130,7 @@ def fem_run_spec(config: dict, run: str) -> dict:
         "save_fields": sorted(save),
         "switch_phi_max": config["ifenn"]["switch_phi_max"],
         "mpi_ranks": entry.get("mpi_ranks", 1),
-    }
+    })
 
 
 IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "smoothing_truncate", "irreversible", "pixel_padding")
@@ -131,9 +138,8 @@ IFENN_OPTIONS = ("predictor", "evaluation", "history_cap", "smoothing_sigma", "s
 
 def ifenn_run_spec(config: dict, run: str) -> dict:
     """An IFENN run: the spec of its FEM run (scene, schedule, solvers, switch threshold)
-    plus the hybrid options (config 'ifenn', overridden per run). The switch-over criterion
-    (``switch_over``, ``switch_increment``) is in the spec only when it is not the paper's
-    phi threshold."""
+    plus the hybrid options (config 'ifenn', overridden per run) and the switch-over criterion
+    (``switch_over``, ``switch_increment``)."""
     if run not in config.get("ifenn_runs", {}):
         raise ConfigError(f"unknown IFENN run '{run}'; allowed: {sorted(config.get('ifenn_runs', {}))}")
     entry = config["ifenn_runs"][run]
@@ -150,11 +156,8 @@ def ifenn_run_spec(config: dict, run: str) -> dict:
     for key in ("stagger_max_iterations", "stagger_tolerance"):
         spec[key] = entry.get(key, spec[key])
     criterion, increment = switch_over(config, run)
-    if criterion != "phi_threshold":  # in the spec only when not the paper's (the published runs' specs stay as they were)
-        spec["switch_over"] = criterion
-        if criterion == "increment":
-            spec["switch_increment"] = increment
-    return spec
+    spec.update(switch_over=criterion, switch_increment=increment if criterion == "increment" else None)
+    return whole("ifenn", spec)
 
 
 #: what an adaptive run may set for itself instead of taking it from its FEM run
@@ -185,4 +188,4 @@ def adaptive_run_spec(config: dict, run: str) -> dict:
         # every displacement key from that preset (options, kept preconditioner, matrix storage), none from the FEM run's
         petsc = {k: v for k, v in spec["petsc"].items() if not k.startswith("displacement")}
         spec.update(linear_solvers=settings["linear_solvers"], petsc={**petsc, **{k: v for k, v in preset.items() if k.startswith("displacement")}})
-    return spec
+    return whole("adaptive", spec)

@@ -86,7 +86,7 @@ def whole_run_speed(specs: list[dict], inputs: dict[str, dict], model_path: str 
     summary, per_increment = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for spec in specs:
-            if spec.get("switch_over") != "start" or "load" not in spec:
+            if spec.get("switch_over") != "start" or spec.get("load") is None:
                 raise ValueError(f"run {spec['name']}: the whole-run benchmark needs switch_over 'start' and a fixed schedule")
             spec = {**spec, "load": spec["load"][:increments] if increments else spec["load"]}
             runs = _runs(spec, Path(inputs[spec["name"]]["mesh"]), Path(model_path), Path(tmp), devices)
