@@ -90,14 +90,16 @@ def physics_loss(
     padding: str = "zeros",
     pixel_weight: torch.Tensor | None = None,
     cuts=None,
+    model=None,
 ) -> torch.Tensor:
     """Loss L = ||R||_2 over all pixels of all images (the paper's eq. for L), N/mm^2.
 
     ``pixel_weight`` (same shape as phi, optional) multiplies R^2 pixel by pixel before the
     sum; training on crops uses it to mask the crop margins and to weight samples. ``cuts``: the
-    slits' cut stencil links (:func:`laplacian_9pt`; stacked ones for a batch of crops).
+    slits' cut stencil links (:func:`laplacian_9pt`; stacked ones for a batch of crops). ``model``:
+    the phase-field model whose equation R is (:func:`residual`; default the paper's).
     """
-    r = residual(phi, history, Gc, lc, h_px, padding, cuts)
+    r = residual(phi, history, Gc, lc, h_px, padding, cuts, model)
     squared = r**2 if pixel_weight is None else pixel_weight * r**2
     return torch.sqrt(squared.sum())
 
