@@ -277,3 +277,15 @@ def test_an_attempt_stops_early_only_when_the_controller_refuses_it_anyway():
     released = AdaptiveLoads(settings)
     released.released = True
     assert not released.refuses_early(1.0)
+
+
+def test_a_spec_file_its_type_does_not_know_stops_the_job_naming_the_key(quick_config, tmp_path):
+    """spec.json is read into its type before anything runs: a misspelled key (or a stale file) stops
+    the job with the key named and nothing written; the spec as the config builds it runs."""
+    from ifenn.config import fem_run_spec
+
+    spec = fem_run_spec(quick_config, "snt1-I")
+    args = _prepare({**spec, "stagger_tolerence": 1e-3}, tmp_path, "typo")
+    done = subprocess.run([sys.executable, *args], env=ENV, capture_output=True, text=True)
+    assert done.returncode == 2 and "stagger_tolerence" in done.stderr and "typo.json" in done.stderr
+    assert not (tmp_path / "typo").exists()

@@ -86,24 +86,21 @@ def main(argv=None) -> int:
     if args.command == "fem":
         from ifenn.fem.solver import run_fem
 
-        with open(args.spec) as stream:
-            spec = json.load(stream)
+        spec = _read_spec(parser, args.spec, "fem")
         if spec.get("start_from") is not None and args.start_dir is None:
             parser.error(f"run {spec['name']} starts from run {spec['start_from']['run']}'s saved state: --start-dir is needed")
         run_fem(spec, args.mesh, args.out, progress=not args.no_progress, start_dir=args.start_dir)
     elif args.command == "ifenn":
         from ifenn.hybrid.runs import run_ifenn
 
-        with open(args.spec) as stream:
-            spec = json.load(stream)
+        spec = _read_spec(parser, args.spec, "ifenn")
         if args.fem_dir is None and spec.get("switch_over", "phi_threshold") != "start":
             parser.error(f"run {spec['name']} switches over from a FEM run ({spec.get('switch_over', 'phi_threshold')}): --fem-dir is needed")
         run_ifenn(spec, args.mesh, args.fem_dir, args.model, args.out, progress=not args.no_progress, device=args.device)
     elif args.command == "adaptive":
         from ifenn.adaptive.run import run_adaptive
 
-        with open(args.spec) as stream:
-            spec = json.load(stream)
+        spec = _read_spec(parser, args.spec, "adaptive")
         if spec.get("start_from") is not None and args.start_dir is None:
             parser.error(f"run {spec['name']} starts from run {spec['start_from']['run']}'s saved state: --start-dir is needed")
         run_adaptive(spec, args.out, progress=not args.no_progress, model_path=args.model, device=args.device, start_dir=args.start_dir)
@@ -111,10 +108,7 @@ def main(argv=None) -> int:
         from ifenn.io import write_csv
         from ifenn.studies.drivers.whole_run_benchmark import paired_whole_run
 
-        specs = []
-        for path in (args.fem_spec, args.ifenn_spec):
-            with open(path) as stream:
-                specs.append(json.load(stream))
+        specs = [_read_spec(parser, args.fem_spec, "fem"), _read_spec(parser, args.ifenn_spec, "ifenn")]
         summary, increments = paired_whole_run(*specs, args.mesh, args.model, args.fem_out, args.ifenn_out, device=args.device,
                                                increments=args.increments, progress=not args.no_progress)
         write_csv(args.table, summary)
@@ -122,11 +116,24 @@ def main(argv=None) -> int:
     elif args.command == "cell":
         from ifenn.studies.drivers.stability import run_cell
 
-        with open(args.spec) as stream:
-            spec = json.load(stream)
+        spec = _read_spec(parser, args.spec, None)
         status = run_cell(spec, args.out, args.fem_dir, args.model, args.device)
         logging.getLogger("ifenn").info("cell %s: %s", spec["name"], status)
     return 0
+
+
+def _read_spec(parser, path: str, kind: str | None) -> dict:
+    """spec.json of a ``kind`` job, checked against its type (:mod:`ifenn.specs`) before anything runs;
+    ``kind`` None: a stability cell's, IFENN when it names a predictor, else FEM."""
+    from ifenn.specs import typed_spec
+
+    with open(path) as stream:
+        spec = json.load(stream)
+    try:
+        typed_spec(kind or ("ifenn" if "predictor" in spec else "fem"), spec)
+    except ValueError as error:
+        parser.error(f"{path}: {error}")
+    return spec
 
 
 if __name__ == "__main__":
