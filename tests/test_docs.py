@@ -45,6 +45,17 @@ def test_nothing_speaks_of_how_the_project_was_developed():
     assert not found, "\n".join(found[:40])
 
 
+OUTSIDE = re.compile(r"\bSPEC\.md\b|\bSPEC section\b|\.\./shared\b")
+
+
+def test_nothing_cites_a_file_the_repository_does_not_hold():
+    """The project speaks of itself only: no specification or shared folder a reader does not have."""
+    found = [f"{path.relative_to(REPO)}:{number}" for path in _files(SPOKEN) if path != Path(__file__)
+             for number, line in enumerate(path.read_text(errors="replace").splitlines(), 1) if OUTSIDE.search(line)]
+    assert not found, found
+    assert OUTSIDE.search("pinned down in SPEC.md") and OUTSIDE.search("see ../shared/paper") and not OUTSIDE.search("SPEC.json")
+
+
 def test_the_history_check_can_fail():
     for line in ("the eighteenth session's machine", "(issue 26)", "Issue #31 step 2", "two sessions ago"):
         assert HISTORY.search(line), line
