@@ -165,11 +165,12 @@ def initial_history(scene: dict, material: dict, grid: PixelGrid) -> np.ndarray:
     notches = [n for n in scene.get("notches", []) if n["kind"] == "history"]
     if not notches:
         return np.zeros(grid.shape)
-    Gc, lc, B = material["Gc"], material["lc"], material["history_notch_B"]
+    from ifenn.models import phase_field_model
+
     xc, yc = grid.pixel_centres()
     points = np.stack(np.meshgrid(xc, yc), axis=-1).reshape(-1, 2)
     distance = np.min([distance_to_segment(points, n["start"], n["end"]) for n in notches], axis=0)
-    return np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0).reshape(grid.shape)
+    return phase_field_model(material).notch_history(distance, material).reshape(grid.shape)
 
 
 def crack_core(phi: np.ndarray, energy: np.ndarray, material: dict, settings: MeshSettings) -> np.ndarray:

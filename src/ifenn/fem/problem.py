@@ -369,15 +369,13 @@ class FractureProblem:
         self.displacement_iterations = 0
 
     def set_initial_history(self) -> None:
-        """H0 of 'history' notches (Borden et al. 2012): B Gc/(2 lc) (1 - 4d/lc) for d <= lc/4."""
+        """H0 of 'history' notches at the Gauss points (the model's ``notch_history``, Borden et al. 2012)."""
         notches = [n for n in self.scene.get("notches", []) if n["kind"] == "history"]
         values = np.zeros(len(self.pixel_of_q_dof))
         if notches:
-            Gc, lc, B = self.material["Gc"], self.material["lc"], self.material["history_notch_B"]
             coords = self.gauss_point_coordinates.reshape(-1, 2)
             distance = np.min([distance_to_segment(coords, n["start"], n["end"]) for n in notches], axis=0)
-            h0 = np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0)
-            values[self.q_dofs.ravel()] = h0
+            values[self.q_dofs.ravel()] = self.model.notch_history(distance, self.material)
         self.history.x.array[:] = values
         self.history_previous.x.array[:] = values
 

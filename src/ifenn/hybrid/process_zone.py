@@ -43,7 +43,7 @@ from ifenn.pixels import box_area, box_within, grow_box
 from ifenn.schema import schema_defaults
 
 #: the settings' defaults: those of the config schema ('ifenn.process_zone')
-VERIFICATION_DEFAULTS = schema_defaults("process_zone")
+PROCESS_ZONE_DEFAULTS = schema_defaults("process_zone")
 
 
 def _smoothing_radius(sigma: float | None, truncate: float) -> int:
@@ -84,8 +84,8 @@ class ProcessZoneInference:
 
     name = "process_zone"
 
-    def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = VERIFICATION_DEFAULTS["tolerance"],
-                 refresh_every: int = VERIFICATION_DEFAULTS["refresh_every"], full_fraction: float = VERIFICATION_DEFAULTS["full_fraction"],
+    def __init__(self, evaluator, sigma: float | None, truncate: float = 4.0, tolerance: float = PROCESS_ZONE_DEFAULTS["tolerance"],
+                 refresh_every: int = PROCESS_ZONE_DEFAULTS["refresh_every"], full_fraction: float = PROCESS_ZONE_DEFAULTS["full_fraction"],
                  local_scale: float = 90.0, shape: tuple[int, int] | None = None):
         if not hasattr(evaluator, "network_state"):
             raise ValueError("process-zone inference needs the local PICNN in its orbit evaluation (ifenn evaluation: orbit), "

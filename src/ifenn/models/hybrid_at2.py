@@ -62,6 +62,16 @@ class HybridAT2:
             return 0.5 * lam * positive(trace) ** 2 + mu * (positive(eps_1) ** 2 + positive(eps_2) ** 2 + positive(eps_zz) ** 2)
         return 0.5 * lam * positive(ufl.tr(eps)) ** 2 + mu * (positive(eps_1) ** 2 + positive(eps_2) ** 2)
 
+    @staticmethod
+    def notch_history(distance, material):
+        """H0 of a 'history' notch (Borden et al. 2012) at ``distance`` (mm, array) from its segment:
+        B Gc/(2 lc) (1 - 4 d/lc) for d <= lc/4, else 0 (N/mm^2; B = ``history_notch_B``): the history
+        at which AT2's local phase field reaches 1 - 1/(B + 1) on the notch line."""
+        import numpy as np
+
+        Gc, lc, B = material["Gc"], material["lc"], material["history_notch_B"]
+        return np.where(distance <= lc / 4, B * Gc / (2 * lc) * (1 - 4 * distance / lc), 0.0)
+
     # ------------------------------------------------------------------ FEM's forms
     def equilibrium_form(self, u, v, phase_field, material):
         """a(u, v) = int g(phi) sigma_0(u) : eps(v) dx (bilinear in u, v; linear in g at each point)."""

@@ -43,7 +43,7 @@ class PixelOperator:
 
     def local_solution(self, history):
         """The solution without diffusion, 2 H / (Gc/lc + 2 H): the start where nothing better is known."""
-        return 2.0 * history / (self.reaction0 + 2.0 * history)
+        return 2.0 * history / self.reaction(history)
 
 
 def edges_of(box, shape: tuple[int, int]) -> tuple[bool, bool, bool, bool]:

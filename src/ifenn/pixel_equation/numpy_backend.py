@@ -175,8 +175,9 @@ class PixelEquation(PixelOperator):
     """The pixel equation of one image: residuals and local solves on boxes. ``cuts``: the
     stencil links the scene's slits cut (:class:`ifenn.pixels.SlitCuts`; None: no slit)."""
 
-    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None):
-        super().__init__(Gc, lc, h_px, padding, cuts)
+    def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None,
+                 model=None):
+        super().__init__(Gc, lc, h_px, padding, cuts, model)
         self._coarse_cache: dict = {}   # box -> the coarse levels' cut links (_level_links)
 
     def _extended(self, phi: np.ndarray, box: Box) -> np.ndarray:
@@ -194,7 +195,7 @@ class PixelEquation(PixelOperator):
         """(a c - D (K9*(c) - 3 c) [- 2 H]) for the centre c of ``ext``, a = Gc/lc + 2 H, in numpy
         (the fallback of the compiled residual and correction)."""
         centre = ext[1:-1, 1:-1]
-        out = (self.reaction0 + 2.0 * history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
+        out = self.reaction(history) * centre - self.diffusion * (_stencil_sum(ext) - 3.0 * centre)
         return out - 2.0 * history if with_rhs else out
 
     def residual_on(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool = True) -> np.ndarray:
@@ -204,7 +205,7 @@ class PixelEquation(PixelOperator):
         if self.cuts is None:
             return self._residual_uncut(phi, history, box, normalised)
         residual = self._residual_uncut(phi, history, box, False) + self.diffusion * self.cuts.flux_on(phi, box)
-        return residual / (self.reaction0 + 2.0 * history[box]) if normalised else residual
+        return residual / self.reaction(history[box]) if normalised else residual
 
     def _residual_uncut(self, phi: np.ndarray, history: np.ndarray, box: Box, normalised: bool) -> np.ndarray:
         lib = compiled_kernel()
@@ -218,7 +219,7 @@ class PixelEquation(PixelOperator):
             return out
         h = history[box]
         residual = self._operator(self._extended(phi, box), h, True)
-        return residual / (self.reaction0 + 2.0 * h) if normalised else residual
+        return residual / self.reaction(h) if normalised else residual
 
     def _apply(self, x: np.ndarray, history: np.ndarray, edges: tuple[bool, bool, bool, bool], links=None) -> np.ndarray:
         """A x on a box (``history``: H there) for x with zero Dirichlet data around it (the
@@ -288,7 +289,7 @@ class PixelEquation(PixelOperator):
         iterations do not get there."""
         edges = edges_of(box, phi.shape)
         h = np.ascontiguousarray(history[box])
-        reaction = self.reaction0 + 2.0 * h
+        reaction = self.reaction(h)
         links = self.cuts.in_box(box) if self.cuts is not None else None
         lib = compiled_kernel()
         if lib is not None:  # multigrid-preconditioned CG, compiled

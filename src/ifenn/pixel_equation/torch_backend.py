@@ -110,8 +110,8 @@ class TorchPixelEquation(PixelOperator):
     operator, same cut links)."""
 
     def __init__(self, Gc: float, lc: float, h_px: float, padding: str = "replicate", cuts: SlitCuts | None = None,
-                 device="cpu"):
-        super().__init__(Gc, lc, h_px, padding, cuts)
+                 device="cpu", model=None):
+        super().__init__(Gc, lc, h_px, padding, cuts, model)
         self.device = torch.device(device)
         self._stencil = torch.as_tensor(LAPLACIAN_K9_STAR, dtype=torch.float64, device=self.device).reshape(1, 1, 3, 3)
         self._cuts_t = None
@@ -125,7 +125,7 @@ class TorchPixelEquation(PixelOperator):
         """R = a phi - D (K9*(phi) - 3 phi) - 2 H on the whole image (the slits' links cut), or R / a."""
         rep = self.padding == "replicate"
         neighbours = F.conv2d(ghosted(phi, (rep,) * 4)[None, None], self._stencil)[0, 0]
-        a = self.reaction0 + 2.0 * history
+        a = self.reaction(history)
         residual = a * phi - self.diffusion * (neighbours - 3.0 * phi) - 2.0 * history
         if self._cuts_t is not None:
             rows, cols, weights, links = self._cuts_t
@@ -154,7 +154,7 @@ class TorchPixelEquation(PixelOperator):
         max |r| <= ``target`` inside it: CG in float64 preconditioned with one float32 V-cycle.
         Returns (max |r| reached, iterations); raises if ``maxiter`` iterations do not get there."""
         cg = self._grid(box, phi.shape)
-        a = self.reaction0 + 2.0 * history[box]
+        a = self.reaction(history[box])
         cg.level.set_coefficients(a, self.diffusion)
         cg.grid.set_coefficients(a, self.diffusion)
         torch.reciprocal(a, out=cg.inv_a)

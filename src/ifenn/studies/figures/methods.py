@@ -55,13 +55,11 @@ def _label_column(ax, points: list[tuple[float, float, str, bool]], spacing: flo
     wanted = sorted(((float(to_axes.transform(ax.transData.transform((x, y)))[1]), x, y, name, bold)
                      for x, y, name, bold in points), reverse=True)
     heights, top = [], 1.0
-    for h, *_ in wanted:   # top down, no closer than spacing, then the column pushed up from the bottom if it overran
+    for h, *_ in wanted:   # top down, no closer than spacing; the column shifted up whole if it ran below the axes
         top = min(h, top - spacing if heights else 1.0)
         heights.append(top)
     overrun = min(0.0, heights[-1]) if heights else 0.0
     heights = [h - overrun for h in heights]
-    for h in range(len(heights) - 2, -1, -1):
-        heights[h] = max(heights[h], heights[h + 1] + spacing)
     for height, (_, x, y, name, bold) in zip(heights, wanted, strict=True):
         ax.annotate(name, (x, y), xytext=(1.02, height), textcoords="axes fraction", fontsize=8, va="center",
                     fontweight="bold" if bold else "normal", annotation_clip=False,
